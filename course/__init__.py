@@ -1,0 +1,1 @@
+"""A differentiable renderer written from scratch in torch, and the course built on it."""

@@ -1,0 +1,297 @@
+"""Cameras: rotations, homogeneous transforms, ``look_at`` and the pinhole model.
+
+The one projection equation of the course (lecture 02)::
+
+    λ [x, y, 1]ᵀ = K [R | t] [X, 1]ᵀ,      K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]  (pixels)
+
+World space is right-handed with +y up. Camera space is OpenCV's: +x right, +y down, +z forward, so a point
+in front of the camera has positive depth ``z``. ``x_cam = R @ x_world + t``. Pixel (row i, column j) covers
+[j, j+1) × [i, i+1) in image coordinates, so its centre is (j + 0.5, i + 0.5).
+
+An orthographic camera drops the division by depth: ``x = fx * X_cam + cx`` (fx in pixels per world unit).
+Every function keeps its input's dtype and device, and gradients flow through K, R and t.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+__all__ = [
+    "as_tensor", "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
+    "look_at", "world_to_camera", "project_points", "pixel_rays", "intrinsics_from_fov", "Camera",
+]
+
+
+def as_tensor(x, *, dtype=None, device=None, name: str = "input") -> torch.Tensor:
+    """Turn ``x`` (tensor, numpy array, list) into a floating tensor, keeping a float dtype it already has."""
+    if isinstance(x, torch.Tensor):
+        t = x
+    else:
+        try:
+            t = torch.as_tensor(x)
+        except Exception as err:  # a ragged list, a string, ...
+            raise TypeError(f"{name} must be a tensor or array of numbers, got {type(x).__name__}") from err
+    if dtype is not None:
+        t = t.to(dtype)
+    elif not t.is_floating_point():
+        t = t.to(torch.get_default_dtype())
+    if device is not None:
+        t = t.to(device)
+    return t
+
+
+def _check_shape(x: torch.Tensor, shape: tuple, name: str) -> None:
+    """Raise a ValueError naming ``name`` unless ``x.shape`` matches ``shape`` (None matches any size)."""
+    ok = x.dim() == len(shape) and all(s is None or s == d for s, d in zip(shape, x.shape))
+    if not ok:
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name} must have shape {want}, got {tuple(x.shape)}")
+    if not torch.isfinite(x).all():
+        raise ValueError(f"{name} contains NaN or inf")
+
+
+# ---------------------------------------------------------------------------------------------- rotations
+
+def axis_angle_to_matrix(axis_angle) -> torch.Tensor:
+    """Rodrigues' formula: rotation by ``|ω|`` radians about the unit axis ``ω / |ω|``.
+
+    axis_angle: (..., 3). Returns (..., 3, 3). ``R = I + sin θ [k]ₓ + (1 - cos θ) [k]ₓ²``.
+    Near θ = 0 the Taylor series is used so the result and its gradient stay finite.
+    """
+    w = as_tensor(axis_angle, name="axis_angle")
+    if w.shape[-1:] != (3,):
+        raise ValueError(f"axis_angle must have shape (..., 3), got {tuple(w.shape)}")
+    theta2 = (w * w).sum(-1, keepdim=True)[..., None]                       # (..., 1, 1)
+    small = theta2 < 1e-8
+    theta2_safe = torch.where(small, torch.ones_like(theta2), theta2)
+    theta = theta2_safe.sqrt()
+    a = torch.where(small, 1 - theta2 / 6, torch.sin(theta) / theta)       # sin θ / θ
+    b = torch.where(small, 0.5 - theta2 / 24, (1 - torch.cos(theta)) / theta2_safe)  # (1 - cos θ) / θ²
+    zero = torch.zeros_like(w[..., 0])
+    wx, wy, wz = w.unbind(-1)
+    cross = torch.stack([zero, -wz, wy, wz, zero, -wx, -wy, wx, zero], -1).reshape(w.shape[:-1] + (3, 3))
+    eye = torch.eye(3, dtype=w.dtype, device=w.device).expand_as(cross)
+    return eye + a * cross + b * (cross @ cross)
+
+
+def euler_to_matrix(angles, order: str = "xyz") -> torch.Tensor:
+    """Rotation from Euler angles in radians, applied in ``order`` about the fixed world axes.
+
+    angles: (3,), the angle for each letter of ``order``. ``order="xyz"`` gives ``R = Rz @ Ry @ Rx``
+    (rotate about x first). Returns (3, 3).
+    """
+    a = as_tensor(angles, name="angles")
+    _check_shape(a, (3,), "angles")
+    if sorted(order) != ["x", "y", "z"]:
+        raise ValueError(f"order must be a permutation of 'xyz', got {order!r}")
+    axes = {"x": 0, "y": 1, "z": 2}
+    R = torch.eye(3, dtype=a.dtype, device=a.device)
+    for angle, letter in zip(a.unbind(0), order):
+        axis = torch.zeros(3, dtype=a.dtype, device=a.device)
+        axis[axes[letter]] = 1
+        R = axis_angle_to_matrix(axis * angle) @ R
+    return R
+
+
+# ------------------------------------------------------------------------------------- rigid transforms
+
+def homogeneous(R, t) -> torch.Tensor:
+    """The 4×4 matrix ``[[R, t], [0, 0, 0, 1]]``. R: (3, 3), t: (3,). Returns (4, 4)."""
+    R = as_tensor(R, name="R")
+    t = as_tensor(t, dtype=R.dtype, device=R.device, name="t")
+    _check_shape(R, (3, 3), "R")
+    _check_shape(t, (3,), "t")
+    bottom = torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=R.dtype, device=R.device)
+    return torch.cat([torch.cat([R, t[:, None]], 1), bottom], 0)
+
+
+def transform_points(M, points) -> torch.Tensor:
+    """Apply a 4×4 homogeneous transform. M: (4, 4), points: (N, 3). Returns (N, 3).
+
+    The last row of M may be projective; the result is divided by the homogeneous coordinate.
+    """
+    M = as_tensor(M, name="M")
+    p = as_tensor(points, dtype=M.dtype, device=M.device, name="points")
+    _check_shape(M, (4, 4), "M")
+    _check_shape(p, (None, 3), "points")
+    ph = torch.cat([p, torch.ones_like(p[:, :1])], 1) @ M.T                 # (N, 4)
+    return ph[:, :3] / ph[:, 3:]
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)):
+    """World-to-camera rotation and translation of a camera at ``eye`` looking at ``target``.
+
+    eye, target, up: (3,) world space. Returns ``R`` (3, 3) and ``t`` (3,) with ``x_cam = R @ x_world + t``,
+    in OpenCV camera axes: the rows of R are the camera's +x (right), +y (down) and +z (forward) axes in world
+    coordinates, so det(R) = +1, and ``t = -R @ eye``.
+    """
+    eye = as_tensor(eye, name="eye")
+    target = as_tensor(target, dtype=eye.dtype, device=eye.device, name="target")
+    up = as_tensor(up, dtype=eye.dtype, device=eye.device, name="up")
+    for v, name in ((eye, "eye"), (target, "target"), (up, "up")):
+        _check_shape(v, (3,), name)
+    forward = target - eye
+    if forward.norm() <= 1e-12 * max(1.0, float(eye.abs().max())):
+        raise ValueError("look_at: eye and target are the same point, the viewing direction is undefined")
+    z = forward / forward.norm()                                            # camera +z: forward
+    right = torch.linalg.cross(z, up)                                       # forward × up points right
+    if right.norm() <= 1e-9 * up.norm():
+        raise ValueError("look_at: up is parallel to the viewing direction; choose another up vector")
+    x = right / right.norm()                                                # camera +x: right
+    y = torch.linalg.cross(z, x)                                            # camera +y: down (z × x)
+    R = torch.stack([x, y, z], 0)
+    return R, -R @ eye
+
+
+def world_to_camera(points_world, R, t) -> torch.Tensor:
+    """``x_cam = R @ x_world + t`` for every point. points_world: (N, 3), R: (3, 3), t: (3,). Returns (N, 3)."""
+    R = as_tensor(R, name="R")
+    p = as_tensor(points_world, dtype=R.dtype, device=R.device, name="points")
+    t = as_tensor(t, dtype=R.dtype, device=R.device, name="t")
+    _check_shape(p, (None, 3), "points")
+    _check_shape(R, (3, 3), "R")
+    _check_shape(t, (3,), "t")
+    return p @ R.T + t
+
+
+# ------------------------------------------------------------------------------------------- projection
+
+def intrinsics_from_fov(fov_y: float, width: int, height: int, dtype=None, device=None) -> torch.Tensor:
+    """K (3, 3) for a vertical field of view ``fov_y`` in degrees, square pixels, principal point at the centre."""
+    if not 0 < fov_y < 180:
+        raise ValueError(f"fov_y must be in (0, 180) degrees, got {fov_y}")
+    f = 0.5 * height / math.tan(math.radians(fov_y) / 2)
+    return torch.tensor([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]],
+                        dtype=dtype or torch.get_default_dtype(), device=device)
+
+
+def project_points(points_world, K, R, t, orthographic: bool = False):
+    """Project world points to pixel coordinates: ``λ [x, y, 1]ᵀ = K (R X + t)``.
+
+    points_world: (N, 3); K: (3, 3); R: (3, 3); t: (3,). Returns ``pixels`` (N, 2) as (x, y) = (column, row)
+    image coordinates (pixel centres at half-integers) and ``depth`` (N,), the camera-space z. Points with
+    depth <= 0 are behind a perspective camera; their pixels are meaningless (the rasterizer clips them).
+    """
+    K = as_tensor(K, name="K")
+    _check_shape(K, (3, 3), "K")
+    p_cam = world_to_camera(points_world, as_tensor(R, dtype=K.dtype, device=K.device, name="R"),
+                            as_tensor(t, dtype=K.dtype, device=K.device, name="t"))   # (N, 3)
+    depth = p_cam[:, 2]
+    if orthographic:
+        xy1 = torch.cat([p_cam[:, :2], torch.ones_like(depth)[:, None]], 1)    # no division by depth
+    else:
+        xy1 = p_cam / depth[:, None]                                           # (X/Z, Y/Z, 1)
+    pixels = xy1 @ K.T                                                         # (N, 3), last column 1
+    return pixels[:, :2], depth
+
+
+def pixel_rays(K, R, t, width: int, height: int, orthographic: bool = False):
+    """One ray through the centre of every pixel, in world space.
+
+    K: (3, 3); R: (3, 3); t: (3,). Returns ``origins`` (H, W, 3) and unit ``directions`` (H, W, 3).
+    Pixel (i, j) is sampled at its centre (j + 0.5, i + 0.5): note the half-pixel offset.
+    """
+    K = as_tensor(K, name="K")
+    R = as_tensor(R, dtype=K.dtype, device=K.device, name="R")
+    t = as_tensor(t, dtype=K.dtype, device=K.device, name="t")
+    _check_shape(K, (3, 3), "K"), _check_shape(R, (3, 3), "R"), _check_shape(t, (3,), "t")
+    if int(width) <= 0 or int(height) <= 0:
+        raise ValueError(f"image size must be positive, got width={width}, height={height}")
+    ys = torch.arange(height, dtype=K.dtype, device=K.device) + 0.5          # row centres
+    xs = torch.arange(width, dtype=K.dtype, device=K.device) + 0.5           # column centres
+    y, x = torch.meshgrid(ys, xs, indexing="ij")                             # (H, W)
+    pix = torch.stack([x, y, torch.ones_like(x)], -1)                        # (H, W, 3)
+    cam = pix @ torch.linalg.inv(K).T                                        # (X/Z, Y/Z, 1) or (X, Y, 1)
+    eye = -R.T @ t                                                           # camera centre in world
+    if orthographic:
+        origins_cam = torch.cat([cam[..., :2], torch.zeros_like(cam[..., :1])], -1)
+        origins = origins_cam @ R + eye                                      # R.T @ (o - t) = o @ R - R.T t
+        dirs = R[2].expand_as(origins)                                       # camera +z in world
+    else:
+        dirs = cam @ R                                                       # R.T @ d
+        dirs = dirs / dirs.norm(dim=-1, keepdim=True)
+        origins = eye.expand_as(dirs)
+    return origins.contiguous(), dirs.contiguous()
+
+
+class Camera:
+    """A pinhole (or orthographic) camera: intrinsics ``K`` (3, 3), pose ``R`` (3, 3), ``t`` (3,), image size
+    ``width`` × ``height`` in pixels, and ``near`` / ``far`` clipping depths (camera-space z).
+
+    ``x_cam = R @ x_world + t``; gradients flow through K, R and t (make them require grad yourself).
+    """
+
+    def __init__(self, K, R, t, width: int, height: int, near: float = 0.1, far: float = 100.0,
+                 orthographic: bool = False):
+        self.K = as_tensor(K, name="K")
+        self.R = as_tensor(R, dtype=self.K.dtype, device=self.K.device, name="R")
+        self.t = as_tensor(t, dtype=self.K.dtype, device=self.K.device, name="t")
+        _check_shape(self.K, (3, 3), "K"), _check_shape(self.R, (3, 3), "R"), _check_shape(self.t, (3,), "t")
+        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+            raise ValueError(f"image size must be positive integers, got width={width}, height={height}")
+        if float(self.K[0, 0]) == 0 or float(self.K[1, 1]) == 0:
+            raise ValueError("K has a zero focal length (K[0, 0] or K[1, 1])")
+        if not (0 <= near < far) or (not orthographic and near <= 0):
+            raise ValueError(f"need 0 < near < far (0 <= near for orthographic), got near={near}, far={far}")
+        self.width, self.height = int(width), int(height)
+        self.near, self.far = float(near), float(far)
+        self.orthographic = bool(orthographic)
+
+    @classmethod
+    def look_at(cls, eye, target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), *, fov_y: float | None = None,
+                ortho_height: float | None = None, width: int, height: int, near: float = 0.1,
+                far: float = 100.0, dtype=None, device=None) -> "Camera":
+        """A camera at ``eye`` looking at ``target``; square pixels, principal point at the image centre.
+
+        Perspective with ``fov_y`` (vertical field of view, degrees), or orthographic with ``ortho_height``
+        (the world-space height the image spans). Exactly one of the two.
+        """
+        if (fov_y is None) == (ortho_height is None):
+            raise ValueError("give exactly one of fov_y (perspective) or ortho_height (orthographic)")
+        eye = as_tensor(eye, dtype=dtype, device=device, name="eye")
+        R, t = look_at(eye, target, up)
+        if fov_y is not None:
+            K = intrinsics_from_fov(fov_y, width, height, dtype=eye.dtype, device=eye.device)
+        else:
+            if ortho_height <= 0:
+                raise ValueError(f"ortho_height must be positive, got {ortho_height}")
+            f = height / ortho_height
+            K = torch.tensor([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], dtype=eye.dtype, device=eye.device)
+        return cls(K, R, t, width, height, near=near, far=far, orthographic=ortho_height is not None)
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.K.dtype
+
+    @property
+    def device(self) -> torch.device:
+        return self.K.device
+
+    @property
+    def eye(self) -> torch.Tensor:
+        """The camera centre in world space, (3,): ``-Rᵀ t``."""
+        return -self.R.T @ self.t
+
+    def to_camera(self, points_world) -> torch.Tensor:
+        """World (N, 3) → camera space (N, 3)."""
+        return world_to_camera(points_world, self.R, self.t)
+
+    def project(self, points_world):
+        """World points (N, 3) → pixel coordinates (N, 2) and camera-space depth (N,)."""
+        return project_points(points_world, self.K, self.R, self.t, orthographic=self.orthographic)
+
+    def rays(self):
+        """Per-pixel-centre ray origins (H, W, 3) and unit directions (H, W, 3) in world space."""
+        return pixel_rays(self.K, self.R, self.t, self.width, self.height, orthographic=self.orthographic)
+
+    def to(self, device=None, dtype=None) -> "Camera":
+        """A copy on another device and/or dtype."""
+        conv = dict(device=device, dtype=dtype)
+        return Camera(self.K.to(**conv), self.R.to(**conv), self.t.to(**conv), self.width, self.height,
+                      self.near, self.far, self.orthographic)
+
+    def __repr__(self) -> str:
+        kind = "orthographic" if self.orthographic else "perspective"
+        return (f"Camera({kind}, {self.width}x{self.height}, fx={float(self.K[0, 0]):.4g}, "
+                f"eye={[round(float(v), 4) for v in self.eye]}, near={self.near:g}, far={self.far:g})")
