@@ -29,7 +29,7 @@ def as_tensor(x, *, dtype=None, device=None, name: str = "input") -> torch.Tenso
         t = x
     else:
         try:
-            t = torch.as_tensor(x)
+            t = torch.as_tensor(x, dtype=dtype)                             # no float32 round trip
         except Exception as err:  # a ragged list, a string, ...
             raise TypeError(f"{name} must be a tensor or array of numbers, got {type(x).__name__}") from err
     if dtype is not None:
@@ -230,7 +230,7 @@ class Camera:
         _check_shape(self.K, (3, 3), "K"), _check_shape(self.R, (3, 3), "R"), _check_shape(self.t, (3,), "t")
         if int(width) != width or int(height) != height or width <= 0 or height <= 0:
             raise ValueError(f"image size must be positive integers, got width={width}, height={height}")
-        if float(self.K[0, 0]) == 0 or float(self.K[1, 1]) == 0:
+        if float(self.K[0, 0].detach()) == 0 or float(self.K[1, 1].detach()) == 0:
             raise ValueError("K has a zero focal length (K[0, 0] or K[1, 1])")
         if not (0 <= near < far) or (not orthographic and near <= 0):
             raise ValueError(f"need 0 < near < far (0 <= near for orthographic), got near={near}, far={far}")

@@ -205,6 +205,11 @@ def _check_inputs(mesh, camera):
     return verts, faces.long()
 
 
+def _camera_space(verts, camera):
+    """World (V, 3) → camera space in float64, detached: coverage is decided in double precision."""
+    return world_to_camera(verts.detach().double(), camera.R.detach().double(), camera.t.detach().double())
+
+
 # ------------------------------------------------------------------------ stage 1: clip, cull and project
 
 @dataclass
@@ -504,9 +509,7 @@ def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fragment
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
     with torch.no_grad():                                                   # discrete decisions: no graph
-        verts_cam = world_to_camera(verts.detach().double(), camera.R.detach().double(),
-                                    camera.t.detach().double())            # (V, 3) float64
-        st = _screen_triangles(verts_cam, faces, camera, cull_backfaces)
+        st = _screen_triangles(_camera_space(verts, camera), faces, camera, cull_backfaces)
         face_map = _zbuffer(st, camera)                                     # (H*W,)
     bary, depth = _visible_surface(face_map, verts, faces, camera, H, W)
     return Fragments(face_map.view(H, W), bary, depth)
@@ -521,9 +524,7 @@ def rasterize_naive(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fr
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
     with torch.no_grad():
-        verts_cam = world_to_camera(verts.detach().double(), camera.R.detach().double(),
-                                    camera.t.detach().double())
-        st = _screen_triangles(verts_cam, faces, camera, cull_backfaces)
+        st = _screen_triangles(_camera_space(verts, camera), faces, camera, cull_backfaces)
         pixels, depths, ids = [], [], []
         for tri, q, face in zip(st.xy, st.q, st.face):
             x0, x1 = int(tri[:, 0].min().floor().clamp(0, W - 1)), int(tri[:, 0].max().ceil().clamp(0, W - 1))

@@ -1,0 +1,387 @@
+"""Rasterizer: hand-checked grids, the naive oracle, watertightness, depth, clipping and stress cases."""
+import math
+
+import pytest
+import torch
+from hypothesis import given, settings, strategies as st
+
+import course.raster as raster
+from course.camera import Camera, axis_angle_to_matrix
+from course.mesh import Mesh, icosphere, cube, plane
+from course.raster import (Fragments, barycentric_2d, edge_function, inside_triangle, interpolate,
+                           perspective_correct_bary, rasterize, rasterize_naive, zbuffer_resolve)
+
+
+def ortho8(width=8, height=8, dtype=torch.float64):
+    """One world unit per pixel, world (0, 0) at the image centre, looking down -z."""
+    return Camera.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), ortho_height=height, width=width, height=height,
+                          dtype=dtype)
+
+
+def screen_mesh(points_xy, faces, z=0.0, size=8):
+    """A mesh given in the screen coordinates of ``ortho8`` (x right, y down)."""
+    return Mesh([[x - size / 2, size / 2 - y, z] for x, y in points_xy], faces)
+
+
+def random_pose(seed):
+    g = torch.Generator().manual_seed(seed)
+    w = torch.randn(3, generator=g, dtype=torch.float64)
+    return axis_angle_to_matrix(w), torch.randn(3, generator=g, dtype=torch.float64)
+
+
+def bumpy_sphere(seed, subdivisions=2):
+    """A closed, star-shaped (non-convex) mesh: an icosphere with random radii."""
+    g = torch.Generator().manual_seed(seed)
+    m = icosphere(subdivisions, dtype=torch.float64)
+    r = 1 + 0.25 * torch.rand(m.num_verts, 1, generator=g, dtype=torch.float64)
+    return Mesh(m.verts * r, m.faces)
+
+
+# ----------------------------------------------------------------------------------- hand-checked 8 × 8
+
+def test_asymmetric_triangle_8x8_hand_checked():
+    # vertices (1, 1), (7, 3), (2, 7) on screen: an asymmetric triangle, so any axis flip shows
+    mesh = screen_mesh([(1, 1), (7, 3), (2, 7)], [[0, 1, 2]])
+    expected = torch.tensor([
+        [0, 0, 0, 0, 0, 0, 0, 0],
+        [0, 1, 0, 0, 0, 0, 0, 0],    # (2.5, 1.5) lies exactly on the edge (1,1)→(7,3), a right edge: out
+        [0, 1, 1, 1, 1, 0, 0, 0],    # (5.5, 2.5) on the same edge: out
+        [0, 1, 1, 1, 1, 1, 0, 0],
+        [0, 0, 1, 1, 1, 0, 0, 0],
+        [0, 0, 1, 1, 0, 0, 0, 0],
+        [0, 0, 1, 0, 0, 0, 0, 0],
+        [0, 0, 0, 0, 0, 0, 0, 0]], dtype=torch.bool)
+    # worked out with the three edge functions at each centre (j + 0.5, i + 0.5)
+    centres = torch.stack(torch.meshgrid(torch.arange(8.0) + 0.5, torch.arange(8.0) + 0.5, indexing="xy"), -1)
+    by_hand = inside_triangle(torch.tensor([[1.0, 1], [7, 3], [2, 7]]), centres.reshape(-1, 2)).view(8, 8)
+    assert torch.equal(by_hand, expected)
+    for rast in (rasterize, rasterize_naive):
+        fr = rast(mesh, ortho8())
+        assert torch.equal(fr.mask, expected)
+        assert torch.equal(fr.face_id, torch.where(expected, 0, -1))
+    fr = rasterize(mesh, ortho8())
+    assert torch.allclose(fr.depth[expected], torch.full((int(expected.sum()),), 5.0, dtype=torch.float64))
+    assert torch.isinf(fr.depth[~expected]).all()
+    # barycentrics reproduce the pixel centre
+    tri = torch.tensor([[1.0, 1], [7, 3], [2, 7]], dtype=torch.float64)
+    p = fr.bary[expected] @ tri
+    rows, cols = expected.nonzero(as_tuple=True)
+    assert torch.allclose(p, torch.stack([cols + 0.5, rows + 0.5], 1).double(), atol=1e-12)
+
+
+def test_nearer_face_wins_and_ties_go_to_lower_id():
+    back = [(0, 0), (8, 0), (0, 8)]
+    mesh = Mesh(torch.cat([screen_mesh(back, [[0, 1, 2]], z=0.0).verts,
+                           screen_mesh(back, [[0, 1, 2]], z=1.0).verts]), [[0, 1, 2], [3, 4, 5]])
+    fr = rasterize(mesh, ortho8())
+    assert set(fr.face_id[fr.mask].tolist()) == {1}                         # z = 1 is nearer to the eye at z = 5
+    assert torch.allclose(fr.depth[fr.mask], torch.tensor(4.0, dtype=torch.float64))
+    same = Mesh(torch.cat([mesh.verts[:3], mesh.verts[:3]]), [[0, 1, 2], [3, 4, 5]])
+    assert set(rasterize(same, ortho8()).face_id[rasterize(same, ortho8()).mask].tolist()) == {0}
+
+
+def test_edge_function_is_exactly_antisymmetric():
+    g = torch.Generator().manual_seed(0)
+    a, b, p = (torch.randn(1000, 2, generator=g, dtype=torch.float64) * 100 for _ in range(3))
+    assert torch.equal(edge_function(a, b, p), -edge_function(b, a, p))
+
+
+def test_square_split_in_two_covers_diagonal_once():
+    mesh = screen_mesh([(0, 0), (8, 0), (8, 8), (0, 8)], [[0, 1, 2], [0, 2, 3]])   # diagonal through centres
+    fr = rasterize(mesh, ortho8())
+    assert fr.mask.all()
+    counts = torch.zeros(64, dtype=torch.long)
+    for f in range(2):
+        pix, _, _ = raster._scan_convert(raster._screen_triangles(
+            _cam_verts(mesh, ortho8()), mesh.faces[f:f + 1], ortho8(), False), 8, 8)
+        counts += torch.bincount(pix, minlength=64)
+    assert torch.equal(counts, torch.ones(64, dtype=torch.long))
+
+
+def _cam_verts(mesh, cam):
+    return raster._camera_space(mesh.verts, cam)
+
+
+# ---------------------------------------------------------------------------------- oracle: naive loop
+
+@pytest.mark.parametrize("orthographic", [False, True])
+@pytest.mark.parametrize("cull", [False, True])
+def test_fast_path_equals_naive(orthographic, cull):
+    mesh = bumpy_sphere(3)
+    kw = dict(ortho_height=3.0) if orthographic else dict(fov_y=50)
+    cam = Camera.look_at((0.5, 1.0, 3.0), (0.1, 0.0, 0.0), width=33, height=27, dtype=torch.float64, **kw)
+    fast, naive = rasterize(mesh, cam, cull_backfaces=cull), rasterize_naive(mesh, cam, cull_backfaces=cull)
+    assert torch.equal(fast.face_id, naive.face_id)
+    assert torch.allclose(fast.depth[fast.mask], naive.depth[naive.mask])
+
+
+def test_chunking_gives_identical_fragments():
+    mesh = icosphere(3)
+    cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=40, width=64, height=48)
+    whole = rasterize(mesh, cam)
+    old = raster.CHUNK_FRAGMENTS
+    try:
+        raster.CHUNK_FRAGMENTS = 97                                         # many tiny chunks
+        chunked = raster._zbuffer(raster._screen_triangles(_cam_verts(mesh, cam), mesh.faces, cam, False),
+                                  cam, budget=97)
+    finally:
+        raster.CHUNK_FRAGMENTS = old
+    assert torch.equal(chunked.view(48, 64), whole.face_id)
+
+
+# --------------------------------------------------------------------------- watertightness (property)
+
+def layer_counts(mesh, cam):
+    """Per pixel, over ALL faces (not only the visible one): fragments of front faces and of back faces."""
+    st_all = raster._screen_triangles(raster._camera_space(mesh.verts, cam), mesh.faces, cam, False)
+    pix, _, face = raster._scan_convert(st_all, cam.width, cam.height)
+    xy, _ = cam.project(mesh.verts.double())
+    tri = xy[mesh.faces]
+    front = edge_function(tri[:, 0], tri[:, 1], tri[:, 2])[face] < 0        # CCW on screen (y down)
+    n = cam.width * cam.height
+    count = lambda sel: torch.bincount(pix[sel], minlength=n).view(cam.height, cam.width)
+    return count(front), count(~front)
+
+
+def random_camera(seed, ortho, distance=4.0):
+    R, _ = random_pose(seed)
+    eye = R @ torch.tensor([0.0, 0.0, distance], dtype=torch.float64)
+    kw = dict(ortho_height=3.2) if ortho else dict(fov_y=45)
+    return Camera.look_at(eye, (0.0, 0.0, 0.0), up=R[:, 1], width=40, height=36, dtype=torch.float64, **kw)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), ortho=st.booleans())
+def test_convex_mesh_front_faces_cover_silhouette_exactly_once(seed, ortho):
+    g = torch.Generator().manual_seed(seed)
+    axes = 0.6 + torch.rand(3, generator=g, dtype=torch.float64)            # a random ellipsoid: convex
+    mesh = icosphere(2, dtype=torch.float64)
+    mesh = Mesh(mesh.verts * axes, mesh.faces)
+    front, back = layer_counts(mesh, random_camera(seed, ortho))
+    assert front.max() <= 1 and back.max() <= 1                             # no double cover
+    assert torch.equal(front, back)                                         # no crack in either layer
+    assert torch.equal(front == 1, rasterize(mesh, random_camera(seed, ortho)).mask)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), ortho=st.booleans())
+def test_closed_mesh_is_watertight(seed, ortho):
+    """A ray through any pixel centre enters a closed surface as often as it leaves it: for every pixel the
+    front-face fragments equal the back-face fragments. A crack or a double cover breaks the balance."""
+    mesh = bumpy_sphere(seed, subdivisions=2)
+    cam = random_camera(seed, ortho)
+    front, back = layer_counts(mesh, cam)
+    assert torch.equal(front, back)
+    assert torch.equal(front > 0, rasterize(mesh, cam).mask)
+
+
+def test_pixel_aligned_grid_is_watertight():
+    """A subdivided plane whose edges pass exactly through pixel centres (the hard case for fill rules)."""
+    m = plane(size=10.0, subdivisions=10, dtype=torch.float64)              # 1-unit squares, xz plane
+    verts = m.verts[:, [0, 2, 1]] * torch.tensor([1.0, -1.0, 1.0], dtype=torch.float64) + 0.5
+    mesh = Mesh(verts, m.faces)                                             # facing +z, shifted half a pixel
+    front, back = layer_counts(mesh, ortho8())
+    assert torch.equal(front, torch.ones(8, 8, dtype=torch.long)) and back.sum() == 0
+
+
+# ------------------------------------------------------------------------------------- depth (property)
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_depth_is_the_ray_plane_depth(seed):
+    g = torch.Generator().manual_seed(seed)
+    tri = torch.randn(3, 3, generator=g, dtype=torch.float64)
+    mesh = Mesh(tri, [[0, 1, 2]])
+    cam = Camera.look_at((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), fov_y=60, width=24, height=20, dtype=torch.float64)
+    fr = rasterize(mesh, cam)
+    origins, dirs = cam.rays()
+    n = torch.linalg.cross(tri[1] - tri[0], tri[2] - tri[0])
+    t = ((tri[0] - origins) @ n) / (dirs @ n)                               # (H, W) ray parameter
+    z = cam.to_camera((origins + t[..., None] * dirs).reshape(-1, 3))[:, 2].view(20, 24)
+    assert torch.allclose(fr.depth[fr.mask], z[fr.mask], rtol=1e-9, atol=1e-9)
+    assert (fr.bary[fr.mask] > -1e-9).all()
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_silhouette_invariant_under_rigid_motion(seed):
+    mesh = bumpy_sphere(seed, subdivisions=1)
+    cam = Camera.look_at((0.3, 0.4, 3.5), (0.0, 0.0, 0.0), fov_y=50, width=32, height=32, dtype=torch.float64)
+    Q, T = random_pose(seed + 1)                                            # move the world rigidly
+    moved = Mesh(mesh.verts @ Q.T + T, mesh.faces)
+    cam2 = Camera(cam.K, cam.R @ Q.T, cam.t - cam.R @ Q.T @ T, 32, 32, cam.near, cam.far)
+    a, b = rasterize(mesh, cam), rasterize(moved, cam2)
+    assert (a.mask != b.mask).sum() <= 1                                    # a centre on an edge may round
+    assert (a.face_id != b.face_id).sum() <= 2
+
+
+# ---------------------------------------------------------------------------------------- clipping
+
+def test_triangle_behind_camera_never_appears():
+    mesh = Mesh([[-1.0, -1.0, 6.0], [1.0, -1.0, 6.0], [0.0, 1.0, 6.0]], [[0, 1, 2]])  # eye at z = 5, looks -z
+    cam = Camera.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y=60, width=16, height=16)
+    assert not rasterize(mesh, cam).mask.any()
+
+
+def test_ground_plane_crossing_near_plane_is_clipped_not_dropped():
+    m = plane(size=40.0, subdivisions=4, dtype=torch.float64)               # y = 0, large, under the eye
+    cam = Camera.look_at((0.0, 1.0, 0.0), (0.0, 1.0, -1.0), fov_y=90, width=32, height=32, near=0.5, far=15.0,
+                         dtype=torch.float64)
+    fr = rasterize(m, cam)
+    origins, dirs = cam.rays()
+    t = -origins[..., 1] / dirs[..., 1]                                     # hit y = 0
+    z = t * (dirs @ cam.R[2])                                               # camera depth of the hit
+    hits = (dirs[..., 1] < 0) & (z >= cam.near) & (z <= cam.far) & ((origins + t[..., None] * dirs).abs()[..., [0, 2]] <= 20).all(-1)
+    assert torch.equal(fr.mask, hits)
+    assert torch.allclose(fr.depth[hits], z[hits])
+    assert torch.isfinite(fr.bary).all()
+
+
+def test_near_clipped_mesh_stays_watertight():
+    mesh = bumpy_sphere(7, subdivisions=2)
+    cam = Camera.look_at((0.0, 0.0, 1.05), (0.0, 0.0, 0.0), fov_y=100, width=40, height=40, near=0.3,
+                         dtype=torch.float64)                               # near plane cuts the sphere
+    fr = rasterize(mesh, cam)
+    assert fr.mask.float().mean() > 0.5 and torch.isfinite(fr.depth[fr.mask]).all()
+    assert (fr.depth[fr.mask] >= cam.near - 1e-9).all()
+    fast, naive = fr, rasterize_naive(mesh, cam)
+    assert torch.equal(fast.face_id, naive.face_id)
+
+
+def test_far_plane_clips_per_pixel():
+    m = plane(size=40.0, subdivisions=2, dtype=torch.float64)
+    cam = Camera.look_at((0.0, 1.0, 0.0), (0.0, 0.0, -4.0), fov_y=60, width=24, height=24, far=6.0,
+                         dtype=torch.float64)
+    fr = rasterize(m, cam)
+    assert fr.mask.any() and (fr.depth[fr.mask] <= 6.0).all()
+    assert (~fr.mask[:12]).all() or fr.mask[:12].sum() < fr.mask[12:].sum()  # horizon region clipped
+
+
+# ---------------------------------------------------------------------------------------- stress
+
+def test_degenerate_and_sliver_triangles_are_finite():
+    verts = torch.tensor([[0.0, 0, 0], [1, 0, 0], [2, 0, 0],                # collinear: zero area
+                          [-2, -2, 0], [2, -2, 0], [0, 2, 0],               # a big triangle behind them
+                          [-3, 1, 0.5], [3, 1 + 1e-9, 0.5], [3, 1, 0.5],    # sliver
+                          [0, -1, 1], [0, -1, 1], [0, -1, 1]], dtype=torch.float64)  # collapsed to a point
+    mesh = Mesh(verts, [[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11]])
+    cam = Camera.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y=60, width=32, height=32, dtype=torch.float64)
+    fr = rasterize(mesh, cam)
+    assert set(fr.face_id.unique().tolist()) <= {-1, 1, 2}
+    assert torch.isfinite(fr.bary).all() and torch.isfinite(fr.depth[fr.mask]).all()
+    verts.requires_grad_(True)
+    fr = rasterize(Mesh(verts, mesh.faces), cam)
+    (fr.bary.sum() + fr.depth[fr.mask].sum()).backward()
+    assert torch.isfinite(verts.grad).all()
+
+
+def test_edge_on_triangle_gives_finite_gradients():
+    verts = torch.tensor([[0.0, -1, -1], [0, 1, -1], [0, 0, 1]], dtype=torch.float64, requires_grad=True)
+    cam = Camera.look_at((1e-7, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y=60, width=16, height=16, dtype=torch.float64)
+    fr = rasterize(Mesh(verts, [[0, 1, 2]]), cam)
+    (fr.bary.sum() + fr.depth[fr.mask].sum()).backward()
+    assert torch.isfinite(verts.grad).all()
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e4])
+def test_scale_invariance(scale):
+    mesh = bumpy_sphere(1, subdivisions=2)
+    cam = lambda s: Camera.look_at((0.4 * s, 0.3 * s, 3.0 * s), (0.0, 0.0, 0.0), fov_y=50, width=32, height=32,
+                                   near=0.1 * s, far=100 * s, dtype=torch.float64)
+    ref = rasterize(mesh, cam(1.0))
+    fr = rasterize(Mesh(mesh.verts * scale, mesh.faces), cam(scale))
+    same = (fr.face_id == ref.face_id) & ref.mask
+    assert (fr.face_id != ref.face_id).sum() <= 1
+    assert torch.allclose(fr.depth[same] / scale, ref.depth[same], rtol=1e-7)
+
+
+def test_float32_matches_float64():
+    mesh64 = bumpy_sphere(2, subdivisions=3)
+    cam64 = Camera.look_at((0.4, 0.3, 3.0), (0.0, 0.0, 0.0), fov_y=50, width=48, height=40, dtype=torch.float64)
+    f64 = rasterize(mesh64, cam64)
+    f32 = rasterize(mesh64.to(dtype=torch.float32), cam64.to(dtype=torch.float32))
+    assert f32.bary.dtype == torch.float32 and f32.depth.dtype == torch.float32
+    same = f32.face_id == f64.face_id
+    assert same.float().mean() > 0.995
+    assert torch.allclose(f32.bary[same & f64.mask].double(), f64.bary[same & f64.mask], atol=1e-4)
+    assert torch.allclose(f32.depth[same & f64.mask].double(), f64.depth[same & f64.mask], rtol=1e-4)
+
+
+def test_empty_view_and_zero_visible_faces():
+    cam = Camera.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y=60, width=8, height=8)
+    far_away = Mesh([[100.0, 100, 0], [101, 100, 0], [100, 101, 0]], [[0, 1, 2]])
+    fr = rasterize(far_away, cam)
+    assert not fr.mask.any() and torch.isinf(fr.depth).all() and (fr.bary == 0).all()
+
+
+# -------------------------------------------------------------------------------------- gradients
+
+def test_interpolate_gradcheck_attr_and_verts():
+    verts = torch.tensor([[-1.0, -1, 0], [1.2, -0.9, 0.3], [0.1, 1.1, -0.2]], dtype=torch.float64)
+    attr = torch.rand(3, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    cam = Camera.look_at((0.1, 0.2, 4.0), (0.0, 0.0, 0.0), fov_y=40, width=10, height=9, dtype=torch.float64)
+    faces = torch.tensor([[0, 1, 2]])
+
+    def f(a, v):
+        return interpolate(a, rasterize(Mesh(v, faces), cam), faces)
+
+    assert torch.autograd.gradcheck(f, (attr.requires_grad_(), verts.requires_grad_()), eps=1e-7, atol=1e-6)
+
+
+def test_depth_and_bary_gradcheck_camera():
+    verts = torch.tensor([[-1.0, -1, 0], [1.2, -0.9, 0.3], [0.1, 1.1, -0.2]], dtype=torch.float64)
+    base = Camera.look_at((0.1, 0.2, 4.0), (0.0, 0.0, 0.0), fov_y=40, width=10, height=9, dtype=torch.float64)
+    mesh = Mesh(verts, [[0, 1, 2]])
+
+    def f(K, R, t):
+        fr = rasterize(mesh, Camera(K, R, t, 10, 9))
+        return fr.bary, fr.depth[fr.mask]
+
+    inputs = tuple(x.clone().requires_grad_() for x in (base.K, base.R, base.t))
+    assert torch.autograd.gradcheck(f, inputs, eps=1e-7, atol=1e-6)
+
+
+def test_no_graph_when_nothing_requires_grad():
+    fr = rasterize(icosphere(1), Camera.look_at((0.0, 0.0, 3.0), fov_y=40, width=16, height=16))
+    assert not fr.bary.requires_grad and not fr.depth.requires_grad
+
+
+# ------------------------------------------------------------------------------------ small helpers
+
+def test_barycentric_2d_and_perspective_correction():
+    tri = torch.tensor([[0.0, 0.0], [4.0, 0.0], [0.0, 2.0]])
+    w = barycentric_2d(tri, torch.tensor([[0.0, 0.0], [2.0, 1.0], [1.0, 0.5]]))
+    assert torch.allclose(w, torch.tensor([[1.0, 0, 0], [0, 0.5, 0.5], [0.5, 0.25, 0.25]]))
+    assert torch.isfinite(barycentric_2d(torch.zeros(3, 2), torch.ones(2, 2))).all()
+    pc = perspective_correct_bary(torch.tensor([[0.5, 0.5, 0.0]]), torch.tensor([[1.0, 3.0, 2.0]]))
+    assert torch.allclose(pc, torch.tensor([[0.75, 0.25, 0.0]]))              # the nearer vertex weighs more
+
+
+def test_zbuffer_resolve():
+    face_map, depth_map = zbuffer_resolve(torch.tensor([0, 0, 2, 2, 2]), torch.tensor([2.0, 1.0, 3.0, 3.0, -1.0]),
+                                          torch.tensor([5, 7, 1, 0, 9]), 4)
+    assert face_map.tolist() == [7, -1, 9, -1]
+    assert depth_map[0] == 1.0 and depth_map[2] == -1.0 and torch.isinf(depth_map[[1, 3]]).all()
+    face_map, _ = zbuffer_resolve(torch.tensor([1, 1]), torch.tensor([3.0, 3.0]), torch.tensor([4, 2]), 2)
+    assert face_map.tolist() == [-1, 2]                                      # tie → lower face id
+    with pytest.raises(ValueError, match="pixel_index"):
+        zbuffer_resolve(torch.tensor([5]), torch.tensor([1.0]), torch.tensor([0]), 4)
+
+
+# ------------------------------------------------------------------------------------------ errors
+
+def test_bad_inputs_raise_clear_errors():
+    cam = Camera.look_at((0.0, 0.0, 5.0), fov_y=60, width=8, height=8)
+    with pytest.raises(TypeError, match="Camera"):
+        rasterize(icosphere(0), "camera")
+    with pytest.raises(TypeError, match="verts"):
+        rasterize(object(), cam)
+    bad = icosphere(0)
+    bad.faces = bad.faces.clone()
+    bad.faces[0, 0] = 99
+    with pytest.raises(ValueError, match="vertex 99 but the mesh has 12 vertices"):
+        rasterize(bad, cam)
+    with pytest.raises(ValueError, match="image size"):
+        Camera.look_at((0.0, 0.0, 5.0), fov_y=60, width=0, height=8)
+    with pytest.raises(ValueError, match="attr"):
+        interpolate(torch.zeros(5), rasterize(icosphere(0), cam), icosphere(0).faces)
