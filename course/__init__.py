@@ -1,1 +1,46 @@
-"""A differentiable renderer written from scratch in torch, and the course built on it."""
+"""A differentiable renderer written from scratch in torch, and the course built on it.
+
+The pipeline::
+
+    Mesh + Camera ──project──▶ screen-space triangles ──rasterize──▶ Fragments ──shade──▶ image
+
+Conventions (fixed; ``tests/test_conventions.py`` pins each one):
+
+* World space is right-handed with +y up.
+* Camera: ``λ [x, y, 1]ᵀ = K [R | t] [X, 1]ᵀ`` with ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels,
+  ``x_cam = R @ x_world + t``, OpenCV axes: +x right, +y down, +z forward (depth positive in front).
+* Images are (H, W, C) with row 0 at the top. Pixel (row i, column j) covers [j, j+1) × [i, i+1); its
+  centre is (j + 0.5, i + 0.5).
+* ``faces`` (F, 3) int64 index ``verts`` (V, 3); a face is front-facing when its vertices appear
+  counter-clockwise to the viewer. Rasterization follows the top-left fill rule.
+* Texture coordinates: u right, v up; texture images are stored row 0 at the top.
+* Colour is linear RGB in [0, 1]. Random functions take a ``torch.Generator`` or a seed.
+* Functions accept numpy arrays or tensors, return tensors, and keep the input's dtype and device.
+
+Shape letters used in every docstring: V vertices, F faces, H × W image, C channels, N points or rays,
+S samples.
+"""
+from .camera import (Camera, axis_angle_to_matrix, euler_to_matrix, homogeneous, intrinsics_from_fov, look_at,
+                     pixel_rays, project_points, transform_points, world_to_camera)
+from .mesh import (Mesh, checker_texture, cube, default_scene_mesh, icosphere, join_meshes, load_mesh, plane,
+                   teapot, torus)
+from .raster import Fragments, interpolate, rasterize, rasterize_naive
+from .render import RenderResult, RenderSettings, Scene, render
+from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, phong,
+                      sample_texture)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    # meshes
+    "Mesh", "load_mesh", "join_meshes", "cube", "icosphere", "plane", "torus", "teapot", "checker_texture",
+    "default_scene_mesh",
+    # cameras
+    "Camera", "look_at", "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
+    "world_to_camera", "project_points", "pixel_rays", "intrinsics_from_fov",
+    # rasterization
+    "Fragments", "rasterize", "rasterize_naive", "interpolate",
+    # shading and rendering
+    "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
+    "sample_texture", "Scene", "RenderSettings", "RenderResult", "render",
+]
