@@ -243,7 +243,9 @@ def _trimesh_visuals(loaded) -> dict:
     image = getattr(material, "image", None)  # SimpleMaterial (OBJ + MTL)
     if image is None:
         image = getattr(material, "baseColorTexture", None)  # PBRMaterial (glTF)
-    texture = np.asarray(image.convert("RGB")) if image is not None else None  # (Ht, Wt, 3) uint8
+    if image is None or min(image.size) <= 2:                  # trimesh's 2x2 placeholder: no real image
+        return {}
+    texture = np.asarray(image.convert("RGB"))                  # (Ht, Wt, 3) uint8
     return {"uvs": np.asarray(uv, dtype=np.float64), "texture": texture}
 
 

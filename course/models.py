@@ -194,7 +194,11 @@ def _weld(verts: np.ndarray, uvs: np.ndarray, faces: np.ndarray):
     _, pos_id = np.unique(pos_key, axis=0, return_inverse=True)
     p = pos_id.reshape(-1)[first][faces]  # (F, 3) position ids: a pole triangle repeats one
     keep = (p[:, 0] != p[:, 1]) & (p[:, 1] != p[:, 2]) & (p[:, 0] != p[:, 2])
-    return verts[first], uvs[first], faces[keep]
+    faces = faces[keep]
+    used = np.unique(faces)                                     # vertices only a dropped pole face used
+    remap = np.full(len(first), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return verts[first][used], uvs[first][used], remap[faces]
 
 
 def teapot(resolution: int = 8, *, dtype=torch.float32, device=None) -> Mesh:

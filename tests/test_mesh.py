@@ -408,3 +408,18 @@ def test_loading_errors_name_the_file(tmp_path):
     empty.write_text("# nothing here\n")
     with pytest.raises(ValueError, match="empty.obj holds no triangles"):
         load_mesh(empty)
+
+
+def test_teapot_has_no_unused_vertices():
+    m = teapot()
+    assert torch.equal(torch.unique(m.faces), torch.arange(m.num_verts))
+
+
+def test_ply_with_uvs_but_no_image_has_no_texture(tmp_path):
+    import trimesh
+    t = trimesh.creation.box()
+    visual = trimesh.visual.TextureVisuals(uv=np.random.default_rng(0).random((len(t.vertices), 2)))
+    t.visual = visual
+    path = tmp_path / "box.ply"
+    t.export(path)
+    assert load_mesh(path).texture is None
