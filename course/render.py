@@ -1,0 +1,442 @@
+"""Scenes and ``render()``: plan the passes a scene needs, run them in order, skip the rest.
+
+::
+
+    plan ─▶ join meshes ─▶ rasterize (cull) ─▶ base colour (texture / vertex colours / material)
+         ─▶ normals ─▶ lighting (flat | Gouraud | Phong) ─▶ wireframe ─▶ composite over the background
+
+Each stage runs only when the scene and settings need it: an unlit scene (or one without lights) computes
+no normals and no lighting; a mesh without a texture makes no UV lookups; when nothing requires a gradient
+the whole render runs under ``torch.no_grad()``; several meshes are joined once, with a per-face mesh index
+that picks each face's material. ``RenderResult.passes`` lists the stages that ran, so a test (or a
+curious student) can see a skip happen.
+
+The degrees of realism of lecture 04 are one setting each: ``shading="wireframe"``, ``"silhouette"``
+(visibility, one flat colour per mesh), ``"flat"``, ``"gouraud"`` / ``"phong"`` (smooth, Blinn-Phong
+highlights), and any of these on a textured mesh. ``"unlit"`` shows base colours; ``"depth"`` and
+``"normals"`` visualise the G-buffer.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import torch
+
+from course.camera import Camera, as_tensor
+from course.mesh import Mesh
+from course.raster import Fragments, interpolate, rasterize
+from course.shading import (
+    AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, normalize,
+    phong_shading, sample_texture, wireframe_overlay,
+)
+
+__all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
+           "default_lights", "cli", "SHADING_MODES"]
+
+SHADING_MODES = ("phong", "gouraud", "flat", "unlit", "silhouette", "wireframe", "depth", "normals")
+LIT_MODES = ("phong", "gouraud", "flat")
+COLOR_MODES = LIT_MODES + ("unlit",)                       # modes that show textures and vertex colours
+FORCEABLE = ("normals", "lighting", "texture", "autograd")
+
+
+# -------------------------------------------------------------------------------------- scene and settings
+
+@dataclass
+class Scene:
+    """What to draw: ``meshes`` (one Mesh or a sequence), seen by ``camera``, lit by ``lights``.
+
+    background: RGB (3,) where nothing is hit. materials: None (``Material()`` for every mesh), one
+    Material for all meshes, or one per mesh. A scene without lights is drawn unlit (base colours).
+    """
+    meshes: object
+    camera: Camera
+    lights: Sequence = ()
+    background: object = (1.0, 1.0, 1.0)
+    materials: object = None
+
+    def __post_init__(self):
+        meshes = (self.meshes,) if isinstance(self.meshes, Mesh) else tuple(self.meshes or ())
+        if not meshes:
+            raise ValueError("the scene has no meshes; give Scene(meshes=mesh or [mesh, ...], ...)")
+        for i, m in enumerate(meshes):
+            if not isinstance(m, Mesh):
+                raise TypeError(f"scene mesh {i} is a {type(m).__name__}, not a Mesh (course.mesh.Mesh)")
+        if not isinstance(self.camera, Camera):
+            raise TypeError(f"camera must be a course.camera.Camera, got {type(self.camera).__name__}")
+        if self.camera.width < 1 or self.camera.height < 1:
+            raise ValueError(f"the camera image is empty ({self.camera.width}x{self.camera.height} pixels)")
+        _check_background(self.background)
+        self.meshes, self.lights = meshes, tuple(self.lights)
+        self.materials = _materials_per_mesh(self.materials, len(meshes))
+        for m in meshes:
+            if m.verts.dtype != self.camera.dtype:
+                raise ValueError(f"meshes are {m.verts.dtype} but the camera is {self.camera.dtype}; "
+                                 "convert one with .to(dtype=...)")
+
+
+def _check_background(bg) -> None:
+    try:
+        ok = as_tensor(bg).numel() == 3
+    except (TypeError, ValueError, RuntimeError):
+        ok = False
+    if not ok:
+        raise ValueError(f"background must be 3 numbers (RGB in [0, 1]), got {bg!r}")
+
+
+def _materials_per_mesh(materials, n: int) -> tuple:
+    if materials is None:
+        return (Material(),) * n
+    if isinstance(materials, Material):
+        return (materials,) * n
+    materials = tuple(materials)
+    if len(materials) != n or not all(isinstance(m, Material) for m in materials):
+        raise ValueError(f"materials must be one Material or one per mesh ({n}), got {len(materials)} items")
+    return materials
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How to draw a scene.
+
+    shading: one of SHADING_MODES. texture_filter: ``"bilinear"`` or ``"nearest"``. textures: use mesh
+    textures (False: vertex or material colours instead). wireframe: draw visible edges on top
+    (``wireframe_width`` pixels, ``wireframe_color``). cull_backfaces: skip faces seen from behind
+    (clockwise on screen). clamp: clip the image to [0, 1] (gradients vanish where it clips).
+    return_depth / return_normals / return_silhouette: fill those fields of the result.
+    """
+    shading: str = "phong"
+    texture_filter: str = "bilinear"
+    textures: bool = True
+    wireframe: bool = False
+    wireframe_width: float = 1.0
+    wireframe_color: tuple = (0.0, 0.0, 0.0)
+    cull_backfaces: bool = False
+    clamp: bool = True
+    return_depth: bool = False
+    return_normals: bool = False
+    return_silhouette: bool = False
+
+    def __post_init__(self):
+        if self.shading not in SHADING_MODES:
+            raise ValueError(f"unknown shading mode {self.shading!r}; choose one of {', '.join(SHADING_MODES)}")
+        if self.texture_filter not in ("bilinear", "nearest"):
+            raise ValueError(f"texture_filter must be 'bilinear' or 'nearest', got {self.texture_filter!r}")
+        if not self.wireframe_width > 0:
+            raise ValueError(f"wireframe_width must be positive (pixels), got {self.wireframe_width}")
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    """image (H, W, 3) linear RGB. depth (H, W) camera z, +inf where empty; normals (H, W, 3) unit world
+    normals, 0 where empty; silhouette (H, W) 1 where a face is hit — each only when asked for.
+    fragments: the rasterizer's output. passes: names of the stages that ran, in order."""
+    image: torch.Tensor
+    depth: Optional[torch.Tensor] = None
+    normals: Optional[torch.Tensor] = None
+    silhouette: Optional[torch.Tensor] = None
+    fragments: Optional[Fragments] = None
+    passes: tuple = ()
+
+
+# -------------------------------------------------------------------------------------------------- plan
+
+def _has_texture(mesh) -> bool:
+    return mesh.texture is not None and mesh.uvs is not None
+
+
+def _tensors(obj):
+    """The tensors held by a mesh, camera, light, material or colour (for the requires-grad check)."""
+    if isinstance(obj, torch.Tensor):
+        return [obj]
+    names = ("verts", "vert_colors", "vert_normals", "uvs", "texture", "K", "R", "t", "color", "intensity",
+             "direction", "position", "ambient", "diffuse", "specular", "shininess", "base_color")
+    return [v for v in (getattr(obj, n, None) for n in names) if isinstance(v, torch.Tensor)]
+
+
+def _needs_grad(scene: Scene) -> bool:
+    objs = [*scene.meshes, scene.camera, *scene.lights, *scene.materials, scene.background]
+    return torch.is_grad_enabled() and any(t.requires_grad for o in objs for t in _tensors(o))
+
+
+def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
+    """The stages ``render`` will run for this scene, in order (a subset of the module docstring's chain)."""
+    mode = settings.shading
+    lit = mode in LIT_MODES and len(scene.lights) > 0                      # no lights: drawn unlit
+    wanted = {
+        "join": len(scene.meshes) > 1,
+        "cull_backfaces": settings.cull_backfaces,
+        "rasterize": True,
+        "texture": mode in COLOR_MODES and settings.textures and any(map(_has_texture, scene.meshes)),
+        "vertex_colors": mode in COLOR_MODES and any(m.vert_colors is not None for m in scene.meshes),
+        "normals": lit or mode == "normals" or settings.return_normals,
+        "lighting": lit,
+        "wireframe": settings.wireframe or mode == "wireframe",
+        "autograd": _needs_grad(scene),
+    }
+    return tuple(name for name, on in wanted.items() if on)
+
+
+# ----------------------------------------------------------------------------------------------- stages
+
+@dataclass(frozen=True)
+class _Geometry:
+    """All meshes as one: ``mesh`` (joined), ``face_mesh`` (F,) and ``vert_mesh`` (V,) mesh index."""
+    mesh: object
+    face_mesh: torch.Tensor
+    vert_mesh: torch.Tensor
+
+
+def _join(meshes) -> _Geometry:
+    dev = meshes[0].faces.device
+    counts = lambda n: torch.tensor([n(m) for m in meshes], device=dev)
+    face_mesh = torch.repeat_interleave(torch.arange(len(meshes), device=dev), counts(lambda m: m.faces.shape[0]))
+    vert_mesh = torch.repeat_interleave(torch.arange(len(meshes), device=dev), counts(lambda m: m.verts.shape[0]))
+    if len(meshes) == 1:
+        return _Geometry(meshes[0], face_mesh, vert_mesh)
+    # Geometry only: colours, uvs and textures stay per mesh (see _base_color), so unlike
+    # course.mesh.join_meshes no texture atlas is built and bilinear lookups never bleed between tiles.
+    offsets = torch.cumsum(torch.tensor([0] + [m.verts.shape[0] for m in meshes[:-1]], device=dev), 0)
+    faces = torch.cat([m.faces + off for m, off in zip(meshes, offsets)])
+    return _Geometry(Mesh(torch.cat([m.verts for m in meshes]), faces), face_mesh, vert_mesh)
+
+
+def _per_vertex(meshes, attr: str, width: int, like: torch.Tensor) -> torch.Tensor:
+    """One attribute of every mesh stacked to (V, width); zeros for meshes that lack it."""
+    rows = [getattr(m, attr) if getattr(m, attr) is not None else torch.zeros(m.num_verts, width)
+            for m in meshes]
+    return torch.cat([as_tensor(r, dtype=like.dtype, device=like.device) for r in rows])
+
+
+def _base_color(scene, geo, frags, settings, passes):
+    """Per-pixel colours (H, W, 3): the mesh's material colour, and the base colour (texture where the
+    mesh has one, else vertex colours, else the material colour) when those passes run."""
+    like = geo.mesh.verts
+    mesh_px = geo.face_mesh[frags.face_id.clamp_min(0)]                      # (H, W) mesh of each pixel
+    table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
+                         for m in scene.materials])                          # (M, 3)
+    material_color = base = table[mesh_px]                                   # (H, W, 3)
+    if "vertex_colors" in passes:
+        has = torch.tensor([m.vert_colors is not None for m in scene.meshes], device=like.device)
+        colors = interpolate(_per_vertex(scene.meshes, "vert_colors", 3, like), frags, geo.mesh.faces)
+        base = torch.where(has[mesh_px][..., None], colors, base)
+    if "texture" in passes:
+        uv = interpolate(_per_vertex(scene.meshes, "uvs", 2, like), frags, geo.mesh.faces)   # (H, W, 2)
+        for k, m in enumerate(scene.meshes):
+            if _has_texture(m):
+                texel = sample_texture(as_tensor(m.texture, dtype=like.dtype, device=like.device), uv,
+                                       settings.texture_filter)              # (H, W, 3)
+                base = torch.where((mesh_px == k)[..., None], texel[..., :3], base)
+    return material_color, base
+
+
+def _vertex_normals(meshes, like) -> torch.Tensor:
+    """(V, 3) vertex normals of all meshes (each mesh's stored normals, else area-weighted)."""
+    return torch.cat([as_tensor(m.vertex_normals(), dtype=like.dtype, device=like.device) for m in meshes])
+
+
+def _pixel_normals(geo, frags, vert_normals, flat: bool) -> torch.Tensor:
+    """(H, W, 3) unit world normals: the face normal (flat) or interpolated vertex normals; 0 where empty."""
+    if flat:
+        n = geo.mesh.face_normals()[frags.face_id.clamp_min(0)]
+        return n * frags.mask[..., None]
+    return normalize(interpolate(vert_normals, frags, geo.mesh.faces))
+
+
+def _light(scene, geo, frags, mode, base, vert_normals) -> torch.Tensor:
+    """(H, W, 3) lit colour with the mode's interpolation (Phong when forced on for an unlit mode)."""
+    mats = scene.materials
+    one = len(set(map(id, mats))) == 1
+    per_face = mats[0] if one else (mats, geo.face_mesh)
+    per_vert = mats[0] if one else (mats, geo.vert_mesh)
+    if mode == "flat":
+        return flat_shading(geo.mesh, frags, scene.camera, scene.lights, per_face, base)
+    if mode == "gouraud":
+        return gouraud_shading(geo.mesh, frags, scene.camera, scene.lights, per_vert, base, vert_normals)
+    return phong_shading(geo.mesh, frags, scene.camera, scene.lights, per_face, base, vert_normals)[0]
+
+
+def _depth_image(frags) -> torch.Tensor:
+    """(H, W, 3) grey: nearest visible depth white, farthest black (normalised over the hit pixels)."""
+    d = frags.depth
+    hit = d[frags.mask]
+    near, far = hit.min(), hit.max()
+    grey = 1 - (d - near) / (far - near).clamp_min(1e-12)
+    return torch.where(frags.mask, grey, torch.zeros_like(grey))[..., None].expand(*d.shape, 3)
+
+
+def _composite(color, frags, background, settings) -> torch.Tensor:
+    bg = as_tensor(background, dtype=color.dtype, device=color.device, name="background").reshape(3)
+    image = torch.where(frags.mask[..., None], color, bg)                    # (H, W, 3)
+    return image.clamp(0, 1) if settings.clamp else image
+
+
+# ------------------------------------------------------------------------------------------------ render
+
+def render(scene: Scene, settings: RenderSettings | None = None, *, _force: Sequence[str] = ()) -> RenderResult:
+    """Render ``scene``; returns a :class:`RenderResult` (``.image`` is (H, W, 3) linear RGB).
+
+    Only the passes the scene needs run (``result.passes`` names them). ``_force`` (private, for tests and
+    benchmarks) turns skipped passes back on — one of ``FORCEABLE`` — to show each skip changes nothing.
+    """
+    settings = settings or RenderSettings()
+    if not isinstance(scene, Scene):
+        raise TypeError(f"render() takes a Scene, got {type(scene).__name__}")
+    unknown = set(_force) - set(FORCEABLE)
+    if unknown:
+        raise ValueError(f"cannot force {sorted(unknown)}; forceable passes: {', '.join(FORCEABLE)}")
+    planned = plan_passes(scene, settings)
+    passes = tuple(dict.fromkeys(planned + tuple(_force)))                  # planned, then forced extras
+    grad_mode = torch.enable_grad() if "autograd" in passes else torch.no_grad()
+    with grad_mode:
+        return _run(scene, settings, passes)
+
+
+def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
+    geo = _join(scene.meshes)                                                # one mesh, per-face mesh index
+    frags = rasterize(geo.mesh, scene.camera, cull_backfaces=settings.cull_backfaces)
+    if not frags.mask.any():                                                 # nothing visible: nothing to shade
+        ran = tuple(p for p in passes if p in ("join", "cull_backfaces", "rasterize", "autograd"))
+        empty = torch.zeros(*frags.shape, 3, dtype=geo.mesh.verts.dtype, device=geo.mesh.verts.device)
+        return _result(_composite(empty, frags, scene.background, settings), frags, None, settings, ran)
+    material_color, base = _base_color(scene, geo, frags, settings, passes)  # texture / vertex colours
+    vert_normals, pixel_normals = _normals(scene, geo, frags, settings, passes)
+    lit = _light(scene, geo, frags, settings.shading, base, vert_normals) if "lighting" in passes else None
+    color = _pick_color(settings.shading, scene, frags, material_color, base, lit, pixel_normals)
+    if "wireframe" in passes:
+        color = wireframe_overlay(color, geo.mesh, frags, scene.camera, settings.wireframe_width,
+                                  settings.wireframe_color)
+    image = _composite(color, frags, scene.background, settings)
+    return _result(image, frags, pixel_normals, settings, passes)
+
+
+def _normals(scene, geo, frags, settings, passes):
+    """Vertex normals (V, 3) and, when they are shown or returned, per-pixel normals (H, W, 3)."""
+    if "normals" not in passes:
+        return None, None
+    vert_normals = _vertex_normals(scene.meshes, geo.mesh.verts)             # (V, 3)
+    if settings.shading == "normals" or settings.return_normals:
+        return vert_normals, _pixel_normals(geo, frags, vert_normals, flat=settings.shading == "flat")
+    return vert_normals, None
+
+
+def _pick_color(mode, scene, frags, material_color, base, lit, pixel_normals) -> torch.Tensor:
+    """(H, W, 3) the colour the shading mode shows (a pass forced on for another mode is left unused)."""
+    if mode in LIT_MODES and lit is not None:
+        return lit
+    if mode == "silhouette":
+        return material_color
+    if mode == "wireframe":
+        return as_tensor(scene.background, dtype=base.dtype, device=base.device).reshape(3).expand_as(base)
+    if mode == "depth":
+        return _depth_image(frags).to(base.dtype)
+    if mode == "normals":
+        return (pixel_normals + 1) / 2
+    return base                                                              # unlit, or lit without lights
+
+
+def _result(image, frags, pixel_normals, settings, ran) -> RenderResult:
+    return RenderResult(
+        image=image,
+        depth=frags.depth if settings.return_depth else None,
+        normals=pixel_normals if settings.return_normals else None,
+        silhouette=frags.mask.to(image.dtype) if settings.return_silhouette else None,
+        fragments=frags,
+        passes=tuple(ran),
+    )
+
+
+# ------------------------------------------------------------------------------------ framing and lights
+
+def frame_camera(meshes, *, width: int, height: int, fov_y: float = 40.0, eye=None,
+                 direction=(0.6, 0.45, 1.0), margin: float = 1.05) -> Camera:
+    """A perspective camera that sees the whole bounding sphere of ``meshes`` (one Mesh or a sequence).
+
+    The camera looks at the sphere's centre from ``eye`` if given (world space), else from ``direction``
+    (from the centre toward the camera) at the distance where the sphere, grown by ``margin``, just fits
+    the narrower field of view. near/far hug the sphere.
+    """
+    meshes = (meshes,) if isinstance(meshes, Mesh) else tuple(meshes)
+    verts = torch.cat([m.verts.detach() for m in meshes])                    # (V, 3) world
+    center = (verts.min(0).values + verts.max(0).values) / 2
+    radius = float((verts - center).norm(dim=-1).max().clamp_min(1e-6)) * margin
+    half = math.atan(math.tan(math.radians(fov_y) / 2) * min(1.0, width / height))   # narrower half-angle
+    if eye is None:
+        toward_eye = normalize(as_tensor(direction, dtype=verts.dtype, device=verts.device, name="direction"))
+        eye = center + toward_eye * (radius / math.sin(half))
+    eye = as_tensor(eye, dtype=verts.dtype, device=verts.device, name="eye")
+    dist = float((eye - center).norm())
+    up = (0.0, 1.0, 0.0) if float(normalize(eye - center)[1].abs()) < 0.99 else (0.0, 0.0, -1.0)
+    return Camera.look_at(eye, center, up, fov_y=fov_y, width=width, height=height,
+                          near=max(dist - 1.5 * radius, 1e-3 * dist), far=dist + 1.5 * radius)
+
+
+def default_lights() -> tuple:
+    """A soft ambient fill and a key light from the upper left, in front (travelling down-right-back)."""
+    return (AmbientLight(intensity=0.25), DirectionalLight(direction=(0.5, -0.7, -0.6), intensity=0.9))
+
+
+# -------------------------------------------------------------------------------------------- command line
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m course render",
+                                description="Render a mesh (default: the bundled textured teapot) to a PNG.")
+    p.add_argument("mesh", nargs="?", help="mesh file (any format trimesh reads); omit for the default scene")
+    p.add_argument("--out", required=True, help="output PNG path")
+    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="image size in pixels")
+    p.add_argument("--width", type=int, help="image width in pixels (default 512)")
+    p.add_argument("--height", type=int, help="image height in pixels (default: the width)")
+    p.add_argument("--eye", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera position (world)")
+    p.add_argument("--fov", type=float, default=40.0, help="vertical field of view in degrees (default 40)")
+    p.add_argument("--shading", default="phong", choices=SHADING_MODES, help="shading mode (default phong)")
+    p.add_argument("--wireframe", action="store_true", help="draw the visible edges on top")
+    p.add_argument("--background", nargs=3, type=float, default=(1.0, 1.0, 1.0), metavar=("R", "G", "B"),
+                   help="background colour, linear RGB in [0, 1] (default white)")
+    return p
+
+
+def _image_size(args) -> tuple[int, int]:
+    if args.size and (args.width or args.height):
+        raise ValueError("give either --size W H or --width/--height, not both")
+    width, height = args.size or (args.width or args.height or 512, args.height or args.width or 512)
+    if width < 1 or height < 1:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    return width, height
+
+
+def _save_png(image: torch.Tensor, path: str) -> None:
+    from PIL import Image
+    pixels = (image.detach().clamp(0, 1).cpu().numpy() * 255 + 0.5).astype("uint8")
+    Image.fromarray(pixels, mode="RGB").save(path, format="PNG")
+
+
+def cli(argv: list[str]) -> int:
+    """``python -m course render [MESH] --out FILE.png [options]``; returns the exit code."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exit_:                                              # --help or a usage error
+        return int(exit_.code or 0)
+    from course import mesh as mesh_module
+    try:
+        width, height = _image_size(args)
+        if args.mesh is None:
+            mesh = mesh_module.default_scene_mesh()
+        else:
+            try:
+                mesh = mesh_module.load_mesh(args.mesh)
+            except Exception as err:                                         # any failure of a user's file
+                message = str(err) if args.mesh in str(err) else f"cannot read mesh {args.mesh!r}: {err}"
+                raise ValueError(message) from err
+        mesh = mesh.to(dtype=torch.float32)
+        camera = frame_camera(mesh, width=width, height=height, fov_y=args.fov, eye=args.eye)
+        scene = Scene(mesh, camera, lights=default_lights(), background=args.background)
+        result = render(scene, RenderSettings(shading=args.shading, wireframe=args.wireframe))
+        _save_png(result.image, args.out)
+    except (ValueError, TypeError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.out} ({width}x{height})")
+    return 0

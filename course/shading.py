@@ -1,0 +1,400 @@
+"""Shading: lights, materials, Lambert and Blinn-Phong, texture lookup, flat / Gouraud / Phong shading.
+
+Two layers, kept apart:
+
+* **Pure lighting math** on points (``...`` leading dimensions: ``N`` points or an ``H, W`` image):
+  :func:`lambert`, :func:`blinn_phong`, :func:`phong`, :func:`sample_texture`, :func:`light_terms` and
+  :func:`shade`. No meshes, no cameras, no Fragments; every one is differentiable and NaN-free at
+  zero vectors and grazing angles (vectors are normalised with a clamped length).
+* **Fragments plumbing**: :func:`flat_shading`, :func:`gouraud_shading`, :func:`phong_shading` and
+  :func:`wireframe_overlay` take a mesh, the camera and the rasterizer's ``Fragments`` and call the pure layer.
+
+Directions follow one rule: every direction argument points *away from the surface* — ``light_dir``
+toward the light, ``view_dir`` toward the viewer — and ``normal`` out of the front face. The one exception
+is :class:`DirectionalLight`'s ``direction``, which is the direction the light *travels* (sunlight going
+down is ``(0, -1, 0)``), as in glTF and most scene formats.
+
+The shading model (lecture 04), for a point with base colour ``c`` and material ``m``::
+
+    colour = c * (m.ambient * Σ ambient_i  +  m.diffuse * Σ L_j max(0, n·l_j))  +  m.specular * Σ L_j s_j
+
+where ``L_j`` is light j's colour × intensity (÷ d² for a point light) and ``s_j`` the Blinn-Phong
+(or Phong) highlight. Colours are linear RGB; nothing is clamped here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence, Union
+
+import torch
+
+from course.camera import as_tensor
+
+__all__ = [
+    "AmbientLight", "DirectionalLight", "PointLight", "Material",
+    "normalize", "lambert", "blinn_phong", "phong", "sample_texture", "light_terms", "shade",
+    "view_directions", "flat_shading", "gouraud_shading", "phong_shading", "edge_distance",
+    "wireframe_overlay",
+]
+
+EPS = 1e-12            # lengths below sqrt(EPS) count as zero in normalize()
+
+Color = Union[float, Sequence[float], torch.Tensor]
+
+
+# ------------------------------------------------------------------------------------------------ lights
+
+@dataclass
+class AmbientLight:
+    """Light arriving equally from every direction: adds ``color * intensity`` times the base colour."""
+    color: Color = (1.0, 1.0, 1.0)
+    intensity: float = 0.2
+
+
+@dataclass
+class DirectionalLight:
+    """A light infinitely far away (the sun). ``direction`` (3,), world space, is the way the light
+    *travels*: ``(0, -1, 0)`` shines straight down. The vector toward the light is ``-direction``."""
+    direction: Color = (0.0, -1.0, 0.0)
+    color: Color = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+    def incident(self, points_world: torch.Tensor):
+        """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
+        d = as_tensor(self.direction, dtype=points_world.dtype, device=points_world.device, name="direction")
+        light_dir = normalize(-d).expand_as(points_world)
+        return light_dir, _radiance(self.color, self.intensity, points_world).expand_as(points_world)
+
+
+@dataclass
+class PointLight:
+    """A light at ``position`` (3,), world space, shining in every direction.
+
+    With ``falloff=True`` (default) the arriving radiance is ``color * intensity / d²`` (inverse square law,
+    d = distance to the light), so ``intensity`` is the brightness at distance 1; ``falloff=False`` drops it.
+    """
+    position: Color = (0.0, 2.0, 2.0)
+    color: Color = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+    falloff: bool = True
+
+    def incident(self, points_world: torch.Tensor):
+        """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
+        p = as_tensor(self.position, dtype=points_world.dtype, device=points_world.device, name="position")
+        to_light = p - points_world                                          # (..., 3)
+        radiance = _radiance(self.color, self.intensity, points_world)
+        if self.falloff:
+            dist2 = (to_light * to_light).sum(-1, keepdim=True).clamp_min(1e-8)
+            radiance = radiance / dist2                                      # inverse square law
+        return normalize(to_light), radiance.expand_as(points_world)
+
+
+def _radiance(color, intensity, like: torch.Tensor) -> torch.Tensor:
+    """color × intensity as an RGB tensor (3,) of ``like``'s dtype and device."""
+    c = as_tensor(color, dtype=like.dtype, device=like.device, name="light color")
+    k = as_tensor(intensity, dtype=like.dtype, device=like.device, name="light intensity")
+    return c.expand(3) * k
+
+
+# ---------------------------------------------------------------------------------------------- material
+
+@dataclass
+class Material:
+    """How a surface answers light. ``ambient``, ``diffuse``, ``specular`` are scalars or RGB (3,) factors;
+    ``shininess`` is the Blinn-Phong exponent (higher: smaller, sharper highlight).
+
+    ``base_color`` (RGB) colours the surface where the mesh has neither a texture nor vertex colours.
+    ``specular_model`` picks ``"blinn_phong"`` (half vector, the default) or ``"phong"`` (mirror vector).
+    Fields may be tensors that require grad.
+    """
+    ambient: Color = 1.0
+    diffuse: Color = 1.0
+    specular: Color = 0.3
+    shininess: Union[float, torch.Tensor] = 32.0
+    base_color: Color = (0.7, 0.7, 0.7)
+    specular_model: str = "blinn_phong"
+
+    def __post_init__(self):
+        if self.specular_model not in ("blinn_phong", "phong"):
+            raise ValueError(f"specular_model must be 'blinn_phong' or 'phong', got {self.specular_model!r}")
+
+
+# ---------------------------------------------------------------------------------------- pure lighting
+
+def normalize(v, eps: float = EPS) -> torch.Tensor:
+    """v: (..., 3) → unit vectors (..., 3). A zero vector stays zero (no NaN, in value or gradient):
+    the length is ``sqrt(max(|v|², eps))``."""
+    v = as_tensor(v, name="vector")
+    return v / (v * v).sum(-1, keepdim=True).clamp_min(eps).sqrt()
+
+
+def _dot(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Dot product over the last axis: (..., 3), (..., 3) → (...)."""
+    return (a * b).sum(-1)
+
+
+def _unit_pair(normal, light_dir):
+    """Tensors of one dtype/device (the normal's), both normalised."""
+    n = as_tensor(normal, name="normal")
+    l = as_tensor(light_dir, dtype=n.dtype, device=n.device, name="light_dir")
+    return normalize(n), normalize(l)
+
+
+def lambert(normal, light_dir, albedo) -> torch.Tensor:
+    """Lambert's cosine law: ``albedo * max(0, n·l)``.
+
+    normal: (N, 3) (any leading shape ``...``); light_dir: (N, 3) or (3,), pointing toward the light;
+    albedo: (N, 3) or (3,). Both directions are normalised first. Returns (N, 3).
+    d/dn is ``albedo ⊗ l`` where n·l > 0 and 0 elsewhere (clamp's subgradient).
+    """
+    n, l = _unit_pair(normal, light_dir)
+    albedo = as_tensor(albedo, dtype=n.dtype, device=n.device, name="albedo")
+    cos = _dot(n, l).clamp_min(0.0)                                          # (N,)
+    return albedo * cos[..., None]
+
+
+def _highlight(cos: torch.Tensor, lit: torch.Tensor, shininess) -> torch.Tensor:
+    """max(0, cos)^shininess where ``lit``, else 0 — with a finite gradient for every exponent.
+
+    ``torch.where`` alone leaks NaN from the unused branch (0^(s-1) · 0 with s < 1), so the cosine is
+    first replaced by 1 where the highlight is off: the classic "safe where".
+    """
+    cos, lit = torch.broadcast_tensors(cos, lit)
+    on = lit & (cos > 0)
+    safe = torch.where(on, cos, torch.ones_like(cos))
+    s = as_tensor(shininess, dtype=cos.dtype, device=cos.device, name="shininess")
+    return torch.where(on, safe ** s, torch.zeros_like(cos))
+
+
+def blinn_phong(normal, light_dir, view_dir, shininess) -> torch.Tensor:
+    """Blinn-Phong highlight: ``max(0, n·h)^shininess`` with the half vector ``h = normalize(l + v)``.
+
+    normal: (N, 3); light_dir: (N, 3) or (3,), toward the light; view_dir: (N, 3) or (3,), toward the viewer;
+    shininess: scalar or (N,). Returns (N,). Zero where n·l <= 0 (a light behind the surface makes no
+    highlight). The peak, 1, is where h = n: the surface would mirror the light into the eye.
+    """
+    n, l = _unit_pair(normal, light_dir)
+    v = normalize(as_tensor(view_dir, dtype=n.dtype, device=n.device, name="view_dir"))
+    h = normalize(l + v)                                                     # half vector (zero if l = -v)
+    lit = _dot(n, l) > 0
+    return _highlight(_dot(n, h), lit, shininess)
+
+
+def phong(normal, light_dir, view_dir, shininess) -> torch.Tensor:
+    """Phong highlight: ``max(0, r·v)^shininess`` with the mirror direction ``r = 2 (n·l) n - l``.
+
+    Same arguments and shapes as :func:`blinn_phong`; returns (N,), zero where n·l <= 0. For the same
+    exponent Phong's highlight is tighter (r·v falls off about twice as fast as n·h).
+    """
+    n, l = _unit_pair(normal, light_dir)
+    v = normalize(as_tensor(view_dir, dtype=n.dtype, device=n.device, name="view_dir"))
+    n_dot_l = _dot(n, l)
+    r = 2 * n_dot_l[..., None] * n - l                                       # mirror of l about n, unit
+    return _highlight(_dot(r, v), n_dot_l > 0, shininess)
+
+
+def sample_texture(texture, uv, mode: str = "bilinear") -> torch.Tensor:
+    """Look up a texture at texture coordinates.
+
+    texture: (Ht, Wt, C) (or (Ht, Wt)), row 0 at the top. uv: (..., 2), u to the right and v up, so uv (0, 0)
+    is the bottom-left corner of the image and texel (row r, col c) has its centre at
+    ``u = (c + 0.5) / Wt, v = 1 - (r + 0.5) / Ht``. ``mode``: ``"bilinear"`` blends the 4 nearest texel
+    centres; ``"nearest"`` takes the texel containing uv. Lookups beyond [0, 1] clamp to the edge texels.
+    Returns (..., C) in the texture's dtype. Bilinear is differentiable w.r.t. the texture and uv (the uv
+    gradient is 0 where the lookup clamps); nearest only w.r.t. the texture.
+    """
+    if mode not in ("bilinear", "nearest"):
+        raise ValueError(f"texture filter must be 'bilinear' or 'nearest', got {mode!r}")
+    tex = as_tensor(texture, name="texture")
+    if tex.dim() == 2:
+        tex = tex[..., None]
+    if tex.dim() != 3 or tex.shape[0] == 0 or tex.shape[1] == 0:
+        raise ValueError(f"texture must have shape (Ht, Wt, C), got {tuple(tex.shape)}")
+    uv = as_tensor(uv, dtype=tex.dtype, device=tex.device, name="uv")
+    if uv.shape[-1:] != (2,):
+        raise ValueError(f"uv must have shape (..., 2), got {tuple(uv.shape)}")
+    Ht, Wt, _ = tex.shape
+    uv = torch.nan_to_num(uv, nan=0.0, posinf=2.0, neginf=-1.0)             # keep the index math finite
+    x = uv[..., 0] * Wt - 0.5                                                # texel column; centres at integers
+    y = (1 - uv[..., 1]) * Ht - 0.5                                          # texel row; row 0 at the top (v = 1)
+    if mode == "nearest":
+        col = (x.detach() + 0.5).floor().clamp(0, Wt - 1).long()           # the texel containing uv
+        row = (y.detach() + 0.5).floor().clamp(0, Ht - 1).long()
+        return tex[row, col]
+    x, y = x.clamp(0, Wt - 1), y.clamp(0, Ht - 1)                           # clamp to edge
+    c0, r0 = x.detach().floor().long(), y.detach().floor().long()
+    c1, r1 = (c0 + 1).clamp(max=Wt - 1), (r0 + 1).clamp(max=Ht - 1)
+    fx, fy = (x - c0)[..., None], (y - r0)[..., None]                        # (..., 1) blend weights
+    top = tex[r0, c0] * (1 - fx) + tex[r0, c1] * fx
+    bottom = tex[r1, c0] * (1 - fx) + tex[r1, c1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _factor(x, like: torch.Tensor, name: str) -> torch.Tensor:
+    """A material factor (scalar, (3,) or (..., 3)) as a tensor broadcastable to ``like`` (..., 3)."""
+    t = as_tensor(x, dtype=like.dtype, device=like.device, name=name)
+    return t[..., None] if t.dim() >= 1 and t.shape[-1] != 3 else t          # (N,) per-point scalars → (N, 1)
+
+
+def light_terms(points_world, normals, view_dirs, lights, material: Material | None = None):
+    """The two halves of the shading model, before the base colour is applied.
+
+    points_world: (..., 3); normals: (..., 3) (need not be unit); view_dirs: (..., 3) toward the viewer;
+    lights: a sequence of AmbientLight / DirectionalLight / PointLight. Returns ``diffuse`` (..., 3), the
+    factor the base colour is multiplied by (ambient + Lambert terms), and ``specular`` (..., 3), added on
+    top. Gouraud shading interpolates these two across a face; Phong shading evaluates them per pixel.
+    """
+    material = material or Material()
+    p = as_tensor(points_world, name="points_world")
+    n = normalize(as_tensor(normals, dtype=p.dtype, device=p.device, name="normals"))
+    v = as_tensor(view_dirs, dtype=p.dtype, device=p.device, name="view_dirs")
+    kd = _factor(material.diffuse, p, "material.diffuse")
+    ks = _factor(material.specular, p, "material.specular")
+    highlight = blinn_phong if material.specular_model == "blinn_phong" else phong
+    diffuse = torch.zeros_like(p)
+    specular = torch.zeros_like(p)
+    for light in lights:
+        if isinstance(light, AmbientLight):
+            ka = _factor(material.ambient, p, "material.ambient")
+            diffuse = diffuse + ka * _radiance(light.color, light.intensity, p)
+        elif isinstance(light, (DirectionalLight, PointLight)):
+            l, radiance = light.incident(p)                                  # (..., 3), (..., 3)
+            diffuse = diffuse + lambert(n, l, kd * radiance)
+            s = highlight(n, l, v, material.shininess)                       # (...,)
+            specular = specular + ks * radiance * s[..., None]
+        else:
+            raise TypeError(f"unknown light {type(light).__name__}; use AmbientLight, DirectionalLight "
+                            "or PointLight")
+    return diffuse, specular
+
+
+def shade(points_world, normals, view_dirs, base_color, lights, material: Material | None = None) -> torch.Tensor:
+    """Colour of surface points: ``base_color * diffuse + specular`` (see :func:`light_terms`).
+
+    points_world, normals, view_dirs: (..., 3) world space; base_color: (..., 3) or (3,); lights: sequence of
+    lights; material: a :class:`Material` (default ``Material()``). Returns (..., 3), linear RGB, unclamped.
+    """
+    diffuse, specular = light_terms(points_world, normals, view_dirs, lights, material)
+    base = as_tensor(base_color, dtype=diffuse.dtype, device=diffuse.device, name="base_color")
+    return base * diffuse + specular
+
+
+# ------------------------------------------------------------------------------------ Fragments plumbing
+
+def view_directions(points_world: torch.Tensor, camera) -> torch.Tensor:
+    """points_world: (..., 3) → unit directions (..., 3) toward the camera: to the eye for a perspective
+    camera, the constant ``-forward`` (minus the third row of R) for an orthographic one."""
+    if camera.orthographic:
+        return (-camera.R[2]).to(points_world.dtype).expand_as(points_world)
+    return normalize(camera.eye.to(points_world.dtype) - points_world)
+
+
+def _face_material(material, index, like):
+    """``material`` as it applies to each element of ``index`` (face or vertex ids).
+
+    material: one Material, or a pair (materials, material_id) with material_id (F,) or (V,) int64 picking
+    one of ``materials`` per element; ``index``: (...) int64 into that table. Returns a Material whose
+    factors are (..., 3) tensors (a single Material is returned unchanged: nothing to gather).
+    """
+    if isinstance(material, Material) or material is None:
+        return material
+    materials, material_id = material
+    mid = material_id[index.clamp_min(0)]                                    # (...) material per element
+    def table(field):
+        rows = [as_tensor(getattr(m, field), dtype=like.dtype, device=like.device).expand(3) for m in materials]
+        return torch.stack(rows)[mid]                                        # (..., 3)
+    shininess = torch.stack([as_tensor(m.shininess, dtype=like.dtype, device=like.device).reshape(())
+                             for m in materials])[mid]                       # (...)
+    model = {m.specular_model for m in materials}
+    if len(model) > 1:
+        raise ValueError("all materials of one scene must use the same specular_model")
+    return Material(table("ambient"), table("diffuse"), table("specular"), shininess,
+                    specular_model=model.pop())
+
+
+def flat_shading(mesh, fragments, camera, lights, material, base_color) -> torch.Tensor:
+    """Flat shading: one lighting evaluation per face, at its centroid with its face normal.
+
+    fragments: the rasterizer's Fragments (H × W); base_color: (H, W, 3) or (3,), applied per pixel (so a
+    texture still varies across a face). material: a Material, or ``(materials, face_material (F,))``.
+    Returns (H, W, 3); empty pixels get face 0's lighting (finite) and are meant to be composited away.
+    """
+    centroids = mesh.verts[mesh.faces].mean(1)                               # (F, 3) world
+    mat = _face_material(material, torch.arange(mesh.num_faces, device=mesh.faces.device), centroids)
+    diffuse_f, specular_f = light_terms(centroids, mesh.face_normals(), view_directions(centroids, camera),
+                                        lights, mat)                         # (F, 3) each
+    face = fragments.face_id.clamp_min(0)                                    # (H, W); empty → face 0
+    return _combine(base_color, diffuse_f[face], specular_f[face])
+
+
+def gouraud_shading(mesh, fragments, camera, lights, material, base_color, vert_normals=None) -> torch.Tensor:
+    """Gouraud shading: light every vertex (with its vertex normal), then interpolate the two lighting terms
+    across each face with the perspective-correct barycentrics. Highlights smaller than a face get lost.
+
+    material: a Material, or ``(materials, vert_material (V,))``. vert_normals: (V, 3), default
+    ``mesh.vertex_normals()``. Returns (H, W, 3).
+    """
+    from course.raster import interpolate
+    verts = mesh.verts                                                       # (V, 3) world
+    normals = mesh.vertex_normals() if vert_normals is None else vert_normals
+    mat = _face_material(material, torch.arange(mesh.num_verts, device=mesh.faces.device), verts)
+    diffuse_v, specular_v = light_terms(verts, normals, view_directions(verts, camera), lights, mat)
+    diffuse = interpolate(diffuse_v, fragments, mesh.faces)                  # (H, W, 3)
+    specular = interpolate(specular_v, fragments, mesh.faces)                # (H, W, 3)
+    return _combine(base_color, diffuse, specular)
+
+
+def phong_shading(mesh, fragments, camera, lights, material, base_color, vert_normals=None):
+    """Phong shading: interpolate vertex normals (and positions) to every pixel, renormalise, light per pixel.
+
+    material: a Material, or ``(materials, face_material (F,))``. Returns the colour (H, W, 3) and the
+    unit per-pixel normals (H, W, 3) (zero where nothing is hit).
+    """
+    from course.raster import interpolate
+    normals_v = mesh.vertex_normals() if vert_normals is None else vert_normals
+    points = interpolate(mesh.verts, fragments, mesh.faces)                  # (H, W, 3) world
+    normals = normalize(interpolate(normals_v, fragments, mesh.faces))       # (H, W, 3) unit (0 if empty)
+    mat = _face_material(material, fragments.face_id, points)
+    diffuse, specular = light_terms(points, normals, view_directions(points, camera), lights, mat)
+    return _combine(base_color, diffuse, specular), normals
+
+
+def _combine(base_color, diffuse, specular):
+    base = as_tensor(base_color, dtype=diffuse.dtype, device=diffuse.device, name="base_color")
+    return base * diffuse + specular
+
+
+def edge_distance(mesh, fragments, camera) -> torch.Tensor:
+    """Screen-space distance, in pixels, from each pixel centre to the nearest edge of the face it sees.
+
+    Returns (H, W), +inf where nothing is hit. For a pixel centre p inside triangle (a, b, c) the nearest
+    boundary point lies on one of the three edge lines, at distance ``|edge_function(a, b, p)| / |b - a|``
+    (twice the area of (a, b, p) over the base length). Vertices behind a perspective camera project to
+    meaningless pixels, so edges of near-clipped faces may be misplaced.
+    """
+    H, W = fragments.face_id.shape
+    mask = fragments.face_id >= 0
+    verts_screen, _ = camera.project(mesh.verts)                             # (V, 2) pixel coordinates
+    tri = verts_screen[mesh.faces[fragments.face_id[mask]]]                 # (N, 3, 2) visible triangles
+    rows, cols = mask.nonzero(as_tuple=True)
+    p = torch.stack([cols, rows], -1).to(tri.dtype) + 0.5                    # (N, 2) pixel centres
+    a, b = tri, tri.roll(-1, dims=1)                                         # edges a→b: 0→1, 1→2, 2→0
+    e = b - a                                                                # (N, 3, 2)
+    cross = e[..., 0] * (p[:, None, 1] - a[..., 1]) - e[..., 1] * (p[:, None, 0] - a[..., 0])
+    dist = cross.abs() / (e * e).sum(-1).clamp_min(EPS).sqrt()               # (N, 3) to each edge line
+    out = torch.full((H, W), float("inf"), dtype=tri.dtype, device=tri.device)
+    out[mask] = dist.min(-1).values
+    return out
+
+
+def wireframe_overlay(image, mesh, fragments, camera, width: float = 1.0, color=(0.0, 0.0, 0.0)) -> torch.Tensor:
+    """Draw the visible triangle edges over ``image`` (H, W, 3): lines ``width`` pixels wide in ``color``.
+
+    A pixel's line coverage is ``clamp(width/2 + 0.5 - d, 0, 1)``, d = :func:`edge_distance`: full inside
+    the line, fading linearly over one pixel at its border (a cheap antialiased line). Only edges of the
+    faces that win the z-test are drawn, so hidden lines are removed for free.
+    """
+    d = edge_distance(mesh, fragments, camera)                               # (H, W) pixels
+    coverage = (width / 2 + 0.5 - d).clamp(0, 1)[..., None].to(image.dtype)  # (H, W, 1); 0 where empty
+    line = as_tensor(color, dtype=image.dtype, device=image.device, name="wireframe color")
+    return image * (1 - coverage) + line * coverage
