@@ -49,3 +49,10 @@ def test_opengl_picks_the_same_faces(cull):
     theirs = gl.face_ids()
     assert (ours == theirs).double().mean() > 0.999
     assert torch.equal(ours >= 0, theirs >= 0) or (ours >= 0).ne(theirs >= 0).sum() < 20
+
+
+def test_bench_skips_are_exact(capsys):
+    from course.bench import bench_skips
+    rows = bench_skips(repeat=1)
+    assert len(rows) == 4
+    assert all(r["max_diff"] == 0.0 for r in rows), rows                    # every skip leaves the image as is
