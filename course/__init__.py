@@ -19,13 +19,16 @@ Conventions (fixed; ``tests/test_conventions.py`` pins each one):
 
 Shape letters used in every docstring: V vertices, F faces, H × W image, C channels, N points or rays,
 S samples.
+
+The ``render()`` function lives in ``course.render`` (``from course.render import render``); it is not
+re-exported here, so that ``course.render`` always names the module.
 """
 from .camera import (Camera, axis_angle_to_matrix, euler_to_matrix, homogeneous, intrinsics_from_fov, look_at,
                      pixel_rays, project_points, transform_points, world_to_camera)
 from .mesh import (Mesh, checker_texture, cube, default_scene_mesh, icosphere, join_meshes, load_mesh, plane,
                    teapot, torus)
 from .raster import Fragments, interpolate, rasterize, rasterize_naive
-from .render import RenderResult, RenderSettings, Scene, render
+from .render import RenderResult, RenderSettings, Scene
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, phong,
                       sample_texture)
 
@@ -42,5 +45,5 @@ __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
-    "sample_texture", "Scene", "RenderSettings", "RenderResult", "render",
+    "sample_texture", "Scene", "RenderSettings", "RenderResult",
 ]

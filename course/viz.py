@@ -134,20 +134,21 @@ def plot_triangles_2d(tris, ax=None, colors=None, labels: bool = False):
     return ax
 
 
-def explorer(draw, **sliders):
+def explorer(draw, **sliders) -> None:
     """An ipywidgets explorer: ``draw(**values)`` redraws a figure whenever a slider moves.
 
     ``sliders`` maps a parameter name to ``(min, max, step, default)``. Costly redraws should pass
     ``continuous_update=False`` through ``draw.continuous_update = False`` or keep images small. Without a
     running widget front-end (a headless run) it falls back to drawing once with the defaults, so the notebook
-    still reads well. Returns the widget (or None).
+    still reads well. Displays the widget itself and returns None (so a cell ending in ``explorer(...)``
+    does not show it twice).
     """
     try:
         import ipywidgets as widgets
         from IPython.display import display
     except ImportError:                                                     # no widgets: a static figure
         draw(**{k: v[3] for k, v in sliders.items()})
-        return None
+        return
     continuous = getattr(draw, "continuous_update", True)
     controls = {k: widgets.FloatSlider(value=d, min=lo, max=hi, step=st, description=k,
                                        continuous_update=continuous)
@@ -155,7 +156,6 @@ def explorer(draw, **sliders):
     out = widgets.interactive_output(lambda **kw: (draw(**kw), plt.show()), controls)
     box = widgets.VBox([widgets.HBox(list(controls.values())), out])
     display(box)
-    return box
 
 
 # ------------------------------------------------------------------ lectures 01-02: shapes, cameras, pixels
