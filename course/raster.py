@@ -8,9 +8,10 @@ The pipeline of ``rasterize`` in four named stages::
 * **Coverage** is decided in screen space with edge functions (``edge_function``) and the top-left fill
   rule, so a pixel centre on an edge shared by two triangles is covered exactly once (watertight).
   The fast path walks each triangle row by row (scan conversion): per covered row it solves the three edge
-  inequalities for the exact span of covered pixel centres and enumerates only those pixels; the span ends
-  are then re-checked with the exact edge functions, so the result equals the per-pixel edge test
-  (``rasterize_naive`` runs that test over whole bounding boxes, and the tests hold the two to each other).
+  inequalities for the span of covered pixel centres and enumerates only those pixels. The crossing of a
+  shared edge is computed bit-identically by both of its triangles, so no centre is lost or counted twice.
+  ``rasterize_naive`` runs the per-pixel edge test over whole bounding boxes; the two agree except for
+  centres within rounding error (about 1e-12 pixel) of an edge, and the tests hold them to each other.
 * **Visibility** is one bulk z-buffer: every covered pixel writes a packed 64-bit key
   ``(float32 depth bits << 32) | face id`` and a single scatter-min keeps the nearest; ties go to the lower
   face id, deterministically.
@@ -34,8 +35,8 @@ __all__ = [
     "barycentric_2d", "perspective_correct_bary", "zbuffer_resolve",
 ]
 
-# Fragments enumerated per chunk: bounds memory (about 100 bytes each at the peak).
-CHUNK_FRAGMENTS = 1 << 22
+# Fragments enumerated per chunk: bounds memory and keeps the working arrays small enough to reuse.
+CHUNK_FRAGMENTS = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -218,9 +219,10 @@ class _ScreenTriangles:
     xy: torch.Tensor     # (T, 3, 2) screen coordinates, ordered so the area is positive
     q: torch.Tensor      # (T, 3) the quantity affine on screen: 1/z (perspective) or z (orthographic)
     face: torch.Tensor   # (T,) int64 id of the original face
+    crosses_far: bool = True   # False when no triangle reaches beyond the far plane (no per-pixel test)
 
     def __getitem__(self, sl):
-        return _ScreenTriangles(self.xy[sl], self.q[sl], self.face[sl])
+        return _ScreenTriangles(self.xy[sl], self.q[sl], self.face[sl], self.crosses_far)
 
 
 def _clip_point(verts_cam, ia, ib, near):
@@ -311,10 +313,12 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriang
     x, y = xy[..., 0], xy[..., 1]
     good = (area != 0) & (x.max(1).values >= 0.5) & (x.min(1).values <= W - 0.5)   # zero area: covers nothing
     good &= (y.max(1).values >= 0.5) & (y.min(1).values <= H - 0.5)
+    crosses_far = bool((z_max[keep] > far).any())
     if bool(good.all()):
-        return _ScreenTriangles(xy, q, face)
+        return _ScreenTriangles(xy, q, face, crosses_far)
     good = good.nonzero().squeeze(1)
-    return _ScreenTriangles(xy.index_select(0, good), q.index_select(0, good), face.index_select(0, good))
+    return _ScreenTriangles(xy.index_select(0, good), q.index_select(0, good), face.index_select(0, good),
+                            crosses_far)
 
 
 # ------------------------------------------------------------------- stage 2: scan conversion + z-buffer
@@ -341,12 +345,14 @@ def _spans(x, y, row_y, width):
     """Per (triangle, row) segment: the first and last covered pixel column, as float64 (S,) tensors.
 
     x, y: (3, S) the triangle's screen vertices, one row per vertex; row_y: (S,) the row's centre.
-    Edge a→b (a = vertex k, b = vertex k+1) is linear along the row, ``E(px) = A px + r`` with
-    ``A = a_y - b_y``: it bounds the span from the left when A > 0 and from the right when A < 0. Solving
-    ``E = 0`` gives a candidate end column; its rounding is repaired by testing the exact ``edge_function``
-    at the candidate and at the next column out, so the span holds exactly the pixel centres that pass the
-    fill-rule test. A horizontal edge (A = 0) keeps the whole row or none of it. The three edges are
-    processed together as (3, S) tensors, with arithmetic instead of ``torch.where`` (several times faster).
+    Along the row, edge a→b (a = vertex k, b = vertex k+1) is the linear function ``E(px) = A px + r`` with
+    ``A = a_y - b_y``: it bounds the span from the left when A > 0 and from the right when A < 0, at the
+    crossing ``x0 = -r / A``. A pixel centre ``j + 0.5`` exactly on the crossing belongs to the triangle only
+    if the edge is a top or left edge. Watertightness does not depend on rounding: the two triangles sharing
+    an edge traverse it in opposite directions and compute *bit-identical* crossings (every operation below
+    is exactly antisymmetric in a and b), so one's last column is always the other's first minus one.
+    A horizontal edge (A = 0) keeps the whole row or none of it. The three edges are processed together as
+    (3, S) tensors, with arithmetic instead of ``torch.where`` (several times faster here).
     """
     BIG = 1e18
     ax, ay, bx, by = x, y, x.roll(-1, 0), y.roll(-1, 0)                    # (3, S) edges v0→v1, v1→v2, v2→v0
@@ -354,19 +360,17 @@ def _spans(x, y, row_y, width):
     sign_a = torch.sign(ay - by)                                            # +1 left edge, -1 right edge
     flat = 1 - sign_a.abs()                                                 # 1.0 for a horizontal edge
     tl = (sign_a + flat * (bx > ax)).clamp_(0, 1)                           # top-left: A > 0, or flat going +x
-
-    def inside(col):                                                        # exact test at centre col + 0.5
-        px = col + 0.5
-        e = (ax - px) * db - da * (bx - px)                                 # edge_function(a, b, p)
-        return (2 * torch.sign(e) + tl).clamp_(0, 1)                        # e > 0, or e == 0 on a top-left edge
-
-    col = torch.floor((bx * da - ax * db) / (ay - by + flat)).clamp_(-1, width)  # near the root of E
-    in_out, in_here = inside(col - sign_a), inside(col)
-    col = col - sign_a * (in_out + in_here - 1)                             # one step out, stay, or one step in
+    x0 = ((bx * da - ax * db) / (ay - by + flat)).clamp_(-2, width + 2)     # the crossing, E(x0) = 0
+    f, c = torch.floor(x0 - 0.5), torch.ceil(x0 - 0.5)
+    on_centre = tl * (f + 1 - c)                                            # 1: a centre exactly on a top-left edge
+    first_col = f + 1 - on_centre                                           # first centre right of x0 (or on it)
+    last_col = c - 1 + on_centre                                            # last centre left of x0 (or on it)
     is_left, is_right = sign_a.clamp(min=0), (-sign_a).clamp_(min=0)
-    first = (col * is_left - BIG * (1 - is_left)).amax(0).clamp_(min=0)
-    last = (col * is_right + BIG * (1 - is_right)).amin(0).clamp_(max=width - 1)
-    empty = (flat * (1 - in_here)).sum(0)                                   # a horizontal edge, row outside
+    first = (first_col * is_left - BIG * (1 - is_left)).amax(0).clamp_(min=0)
+    last = (last_col * is_right + BIG * (1 - is_right)).amin(0).clamp_(max=width - 1)
+    # a horizontal edge: the whole row is inside if the row is on the inner side, E = da (a_x - b_x) > 0
+    inside_flat = (2 * torch.sign(da) * torch.sign(ax - bx) + tl).clamp_(0, 1)
+    empty = (flat * (1 - inside_flat)).sum(0)
     return first, last - BIG * empty
 
 
@@ -393,11 +397,10 @@ def _scan_convert(st: _ScreenTriangles, width: int, height: int):
     # q_first + qx * (element index - segment start), folded so each pixel needs two look-ups
     q0, qx, qy = (torch.take(t, tri_of_seg) for t in _plane(st))
     seg_of_px, px_start = _expand(length.long())                            # one element per covered pixel
-    px_start = px_start.to(first.dtype)
-    base = (row_y - 0.5) * width + first - px_start                         # pixel = base + element index
-    q_base = q0 + qx * (first + 0.5 - px_start) + qy * row_y
-    index = torch.arange(seg_of_px.numel(), dtype=first.dtype, device=first.device)
-    pixel = (torch.take(base, seg_of_px) + index).long()
+    base = ((row_y - 0.5) * width + first).long() - px_start                # pixel = base + element index
+    q_base = q0 + qx * (first + 0.5 - px_start.to(first.dtype)) + qy * row_y
+    index = torch.arange(seg_of_px.numel(), device=first.device)
+    pixel = torch.take(base, seg_of_px) + index
     q_px = torch.take(q_base, seg_of_px) + torch.take(qx, seg_of_px) * index
     face = torch.take(st.face.index_select(0, tri_of_seg), seg_of_px)
     return pixel, q_px, face
@@ -417,8 +420,8 @@ def _chunks(st: _ScreenTriangles, width, height, budget):
     """Split triangles into consecutive batches whose bounding boxes hold about ``budget`` pixels."""
     _, _, n_rows = _row_range(st.xy, height)
     x = st.xy[..., 0]
-    n_cols = (x.max(1).values.clamp(max=width) - x.min(1).values.clamp(min=0) + 2).clamp(min=1)
-    cost = torch.cumsum(n_rows * n_cols + 1, 0)                             # upper bound on fragments
+    n_cols = (x.max(1).values.clamp(max=width) - x.min(1).values.clamp(min=0)).clamp(min=0)
+    cost = torch.cumsum(n_rows * (0.5 * n_cols + 1), 0)                     # about the fragments and rows
     if float(cost[-1]) <= budget:
         yield st
         return
@@ -437,18 +440,21 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK_FRAGMENTS) -> torch.Tens
         return torch.full_like(zbuf, -1)
     for chunk in _chunks(st, W, H, budget):
         pixel, q, face = _scan_convert(chunk, W, H)
-        depth = q if camera.orthographic else 1 / q
-        far = depth > camera.far                                            # the far plane clips per pixel
-        if bool(far.any()):
-            ok = (~far).nonzero().squeeze(1)
+        depth = q.float() if camera.orthographic else q.float().reciprocal_()
+        if chunk.crosses_far:                                               # the far plane clips per pixel
+            ok = (depth <= camera.far).nonzero().squeeze(1)
             pixel, depth, face = pixel[ok], depth[ok], face[ok]
         zbuf.scatter_reduce_(0, pixel, _depth_keys_positive(depth, face), reduce="amin")
-    return torch.where(zbuf == empty, torch.full_like(zbuf, -1), zbuf & 0xFFFFFFFF)
+    return ((zbuf + 1) & 0xFFFFFFFF) - 1                                    # low 32 bits: face id; empty → -1
 
 
 def _depth_keys_positive(depth, face):
-    """``_depth_keys`` for depths known to be >= 0 (no mirroring needed)."""
-    return (depth.float().clamp_(min=0).view(torch.int32).long() << 32) | face
+    """``_depth_keys`` for float32 depths known to be >= 0 (no mirroring needed).
+
+    The empty key, int64 max, has all 32 low bits set, so ``((key + 1) & 0xFFFFFFFF) - 1`` reads -1 for an
+    empty pixel and the face id otherwise.
+    """
+    return (depth.clamp_(min=0).view(torch.int32).long() << 32) | face
 
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
@@ -468,24 +474,28 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
     pix = (face_map >= 0).nonzero().squeeze(1)                              # (M,) covered pixels
     face = face_map.index_select(0, pix)
-    visible = torch.zeros(faces.shape[0], dtype=torch.long, device=device)
-    visible[face] = 1                                                       # only faces some pixel sees
-    used = visible.nonzero().squeeze(1)                                     # (U,)
-    compact = torch.cumsum(visible, 0) - 1                                  # face id → row of the table
+    if faces.shape[0] <= pix.numel():                                       # few faces: a table row for each
+        used, row_of_face = None, face
+    else:                                                                   # many: only faces some pixel sees
+        seen = torch.bincount(face, minlength=faces.shape[0]) > 0
+        used = seen.nonzero().squeeze(1)                                    # (U,)
+        row_of_face = (torch.cumsum(seen, 0) - 1).index_select(0, face)
     verts_cam = world_to_camera(verts.to(dtype), R, t)                      # (V, 3)
-    v = verts_cam[faces.index_select(0, used)]                              # (U, 3, 3)
+    v = verts_cam[faces if used is None else faces.index_select(0, used)]   # (U, 3, 3)
     v1, v2 = v.roll(-1, dims=1), v.roll(-2, dims=1)                         # v_{k+1}, v_{k+2}
     c = torch.linalg.cross(v1, v2)                                          # (U, 3, 3) rows c_k
     if camera.orthographic:                                                 # o = (K⁻¹p).xy, d = +z
         e = v2 - v1
         c = torch.stack([-e[..., 1], e[..., 0], c[..., 2]], -1)
     rows = c @ torch.linalg.inv(K)                                          # (U, 3, 3): w_k = rows_k · p
-    table = torch.cat([rows, (v[..., 2:] * rows).sum(1, keepdim=True), rows.sum(1, keepdim=True)], 1)
-    tab = table.index_select(0, compact.index_select(0, face))              # (M, 5, 3): w_0..2, Σ z w, Σ w
-    px = ((pix % W).to(dtype) + 0.5)[:, None]                               # pixel centres
-    py = ((pix // W).to(dtype) + 0.5)[:, None]
-    wz = tab[..., 0] * px + tab[..., 1] * py + tab[..., 2]                  # (M, 5)
-    s = wz[:, 4:]
+    table = torch.cat([rows, (v[..., 2:] * rows).sum(1, keepdim=True)], 1)  # (U, 4, 3): w_0, w_1, w_2, Σ z w
+    tab = table.transpose(1, 2).contiguous().index_select(0, row_of_face)   # (M, 3, 4): coefficients of x, y, 1
+    pix_d = pix.double()
+    row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
+    px = (pix_d - row * W + 0.5).to(dtype)[:, None]                         # pixel centres
+    py = (row + 0.5).to(dtype)[:, None]
+    wz = tab[:, 0] * px + tab[:, 1] * py + tab[:, 2]                        # (M, 4)
+    s = wz[:, :3].sum(1, keepdim=True)                                      # Σ w
     tiny = torch.finfo(dtype).tiny ** 0.5
     s = torch.where(s.abs() < tiny, torch.full_like(s, tiny), s)            # edge-on faces: stay finite
     bary, depth = wz[:, :3] / s, wz[:, 3] / s[:, 0]
