@@ -119,13 +119,9 @@ def test_chunking_gives_identical_fragments():
     mesh = icosphere(3)
     cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=40, width=64, height=48)
     whole = rasterize(mesh, cam)
-    old = raster.CHUNK_FRAGMENTS
-    try:
-        raster.CHUNK_FRAGMENTS = 97                                         # many tiny chunks
-        chunked = raster._zbuffer(raster._screen_triangles(_cam_verts(mesh, cam), mesh.faces, cam, False),
-                                  cam, budget=97)
-    finally:
-        raster.CHUNK_FRAGMENTS = old
+    st_all = raster._screen_triangles(_cam_verts(mesh, cam), mesh.faces, cam, False)
+    assert len(list(raster._chunks(st_all, 64, 48, (97, 97)))) > 20               # many tiny chunks
+    chunked = raster._zbuffer(st_all, cam, budget=(97, 97))
     assert torch.equal(chunked.view(48, 64), whole.face_id)
 
 
