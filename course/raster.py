@@ -207,6 +207,16 @@ def _check_inputs(mesh, camera):
     return verts, faces.long()
 
 
+def _min3(a):
+    """Smallest of the three columns of a (T, 3) tensor (faster than a reduction over a length-3 axis)."""
+    return torch.minimum(torch.minimum(a[:, 0], a[:, 1]), a[:, 2])
+
+
+def _max3(a):
+    """Largest of the three columns of a (T, 3) tensor."""
+    return torch.maximum(torch.maximum(a[:, 0], a[:, 1]), a[:, 2])
+
+
 def _camera_space(verts, camera):
     """World (V, 3) → camera space in float64, detached: coverage is decided in double precision."""
     return world_to_camera(verts.detach().double(), camera.R.detach().double(), camera.t.detach().double())
@@ -283,8 +293,8 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriang
     K = camera.K.detach().to(torch.float64)
     F = faces.shape[0]
     flat = faces.reshape(-1)
-    z = verts_cam[:, 2].index_select(0, flat).view(F, 3)                    # (F, 3)
-    z_min, z_max = z.min(1).values, z.max(1).values
+    z = verts_cam[:, 2].contiguous().index_select(0, flat).view(F, 3)       # (F, 3)
+    z_min, z_max = _min3(z), _max3(z)
     keep = (z_max >= near) & (z_min <= far)
     if cull_backfaces:
         v = verts_cam.index_select(0, flat).view(F, 3, 3)
@@ -306,14 +316,15 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriang
         xy_c, q_c = _project(tri_cam, camera, K)
         xy, q, face = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids])
     # reorder (v0, v1, v2) → (v0, v2, v1) where the screen area is negative, so every area is positive
+    # (a selection, not arithmetic: the coordinates must stay bit-identical to the neighbours' copies)
     area = edge_function(xy[:, 0], xy[:, 1], xy[:, 2])
-    flip = (area < 0).to(xy.dtype)
-    d_xy, d_q = (xy[:, 2] - xy[:, 1]) * flip[:, None], (q[:, 2] - q[:, 1]) * flip
-    xy = torch.stack([xy[:, 0], xy[:, 1] + d_xy, xy[:, 2] - d_xy], 1)
-    q = torch.stack([q[:, 0], q[:, 1] + d_q, q[:, 2] - d_q], 1)
+    flip = (area < 0).long()
+    order = torch.stack([torch.zeros_like(flip), 1 + flip, 2 - flip], 1)    # (T, 3) corner order
+    xy = xy.gather(1, order[:, :, None].expand(-1, -1, 2))
+    q = q.gather(1, order)
     x, y = xy[..., 0], xy[..., 1]
-    good = (area != 0) & (x.max(1).values >= 0.5) & (x.min(1).values <= W - 0.5)   # zero area: covers nothing
-    good &= (y.max(1).values >= 0.5) & (y.min(1).values <= H - 0.5)
+    good = (area != 0) & (_max3(x) >= 0.5) & (_min3(x) <= W - 0.5)          # zero area: covers nothing
+    good &= (_max3(y) >= 0.5) & (_min3(y) <= H - 0.5)
     crosses_far = bool((z_max[keep] > far).any())
     if bool(good.all()):
         return _ScreenTriangles(xy, q, face, crosses_far)
@@ -327,8 +338,8 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriang
 def _row_range(xy, height):
     """Rows whose pixel centres (y = i + 0.5) the triangles' y-extent reaches: first, last, count."""
     y = xy[..., 1]
-    first = torch.ceil(y.min(1).values - 0.5).clamp(min=0)
-    last = torch.floor(y.max(1).values - 0.5).clamp(max=height - 1)
+    first = torch.ceil(_min3(y) - 0.5).clamp(min=0)
+    last = torch.floor(_max3(y) - 0.5).clamp(max=height - 1)
     return first.long(), last.long(), (last - first + 1).clamp(min=0).long()
 
 
@@ -424,7 +435,7 @@ def _chunks(st: _ScreenTriangles, width, height, budget):
     seg_budget, frag_budget = budget
     _, _, n_rows = _row_range(st.xy, height)
     x = st.xy[..., 0]
-    n_cols = (x.max(1).values.clamp(max=width) - x.min(1).values.clamp(min=0)).clamp(min=0)
+    n_cols = (_max3(x).clamp(max=width) - _min3(x).clamp(min=0)).clamp(min=0)
     cost = torch.cumsum(n_rows / seg_budget + n_rows * n_cols / (2 * frag_budget), 0)   # (T,) in batches
     if float(cost[-1]) <= 1:
         yield st
