@@ -345,12 +345,8 @@ def _row_range(xy, height):
 
 def _expand(counts: torch.Tensor):
     """Segments of the given lengths laid end to end: the owning segment of every element, and the start
-    of every segment. ``owner`` comes from a cumulative sum of segment starts (faster than repeat_interleave).
-    """
-    start = torch.cumsum(counts, 0) - counts                                # exclusive prefix sum
-    total = int(counts.sum())
-    marker = torch.bincount(start, minlength=total + 1)[:total]             # segments starting at each element
-    return torch.cumsum(marker, 0) - 1, start
+    of every segment (``repeat_interleave`` of the counts alone returns exactly the owners)."""
+    return torch.repeat_interleave(counts), torch.cumsum(counts, 0) - counts
 
 
 def _spans(x, y, row_y, width):
@@ -380,6 +376,8 @@ def _spans(x, y, row_y, width):
     is_left, is_right = sign_a.clamp(min=0), (-sign_a).clamp_(min=0)
     first = (first_col * is_left - BIG * (1 - is_left)).amax(0).clamp_(min=0)
     last = (last_col * is_right + BIG * (1 - is_right)).amin(0).clamp_(max=width - 1)
+    if not bool(flat.any()):
+        return first, last
     # a horizontal edge: the whole row is inside if the row is on the inner side, E = da (a_x - b_x) > 0
     inside_flat = (2 * torch.sign(da) * torch.sign(ax - bx) + tl).clamp_(0, 1)
     empty = (flat * (1 - inside_flat)).sum(0)
@@ -459,17 +457,20 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
         if chunk.crosses_far:                                               # the far plane clips per pixel
             ok = (depth <= camera.far).nonzero().squeeze(1)
             pixel, depth, face = pixel[ok], depth[ok], face[ok]
+        if camera.orthographic:                                             # z may round to -0.0 at near = 0
+            depth.clamp_(min=0)
         zbuf.scatter_reduce_(0, pixel, _depth_keys_positive(depth, face), reduce="amin")
     return ((zbuf + 1) & 0xFFFFFFFF) - 1                                    # low 32 bits: face id; empty → -1
 
 
 def _depth_keys_positive(depth, face):
-    """``_depth_keys`` for float32 depths known to be >= 0 (no mirroring needed).
+    """``_depth_keys`` for float32 depths known to be >= 0 (no mirroring needed; perspective depths are
+    positive, orthographic ones are clamped by the caller).
 
     The empty key, int64 max, has all 32 low bits set, so ``((key + 1) & 0xFFFFFFFF) - 1`` reads -1 for an
     empty pixel and the face id otherwise.
     """
-    return (depth.clamp_(min=0).view(torch.int32).long() << 32) | face
+    return (depth.view(torch.int32).long() << 32) | face
 
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
