@@ -146,15 +146,26 @@ def perspective_correct_bary(bary_screen, z) -> torch.Tensor:
     return w / torch.where(s == 0, torch.ones_like(s), s)
 
 
-def _depth_keys(depth: torch.Tensor, face_id: torch.Tensor) -> torch.Tensor:
+EMPTY_KEY = torch.iinfo(torch.int64).max    # z-buffer start value; its low 32 bits are all set
+
+
+def _depth_keys(depth: torch.Tensor, face_id: torch.Tensor, positive: bool = False) -> torch.Tensor:
     """Pack (depth, face id) into int64 keys whose integer order is (depth, face) order.
 
-    The float32 bit pattern of a float orders like an int32 for positive values; negative ones are mirrored.
-    The face id fills the low 32 bits, so equal depths resolve to the lower face id.
+    The float32 bit pattern of a float orders like an int32 for positive values; negative ones (and -0.0)
+    are mirrored, a step skipped when the caller knows every depth is > 0 (``positive``, the perspective
+    fast path). The face id fills the low 32 bits, so equal depths resolve to the lower face id.
     """
     bits = depth.to(torch.float32).view(torch.int32).to(torch.int64)        # sign-extended int32
-    bits = torch.where(bits < 0, bits ^ 0x7FFFFFFF, bits)                  # mirror negative floats
+    if not positive:
+        bits = torch.where(bits < 0, bits ^ 0x7FFFFFFF, bits)              # mirror negative floats
     return (bits << 32) | face_id
+
+
+def _faces_of(zbuf: torch.Tensor) -> torch.Tensor:
+    """Face ids from resolved keys: the low 32 bits, and -1 where a pixel still holds ``EMPTY_KEY``
+    (adding 1 carries its all-ones low bits to zero)."""
+    return ((zbuf + 1) & 0xFFFFFFFF) - 1
 
 
 def zbuffer_resolve(pixel_index, depth, face_id, num_pixels: int):
@@ -176,10 +187,9 @@ def zbuffer_resolve(pixel_index, depth, face_id, num_pixels: int):
         raise ValueError("face_id must lie in [0, 2**31)")
     ok = torch.isfinite(depth)
     keys = _depth_keys(depth[ok], face_id[ok])
-    empty = torch.iinfo(torch.int64).max
-    zbuf = torch.full((num_pixels,), empty, dtype=torch.int64, device=depth.device)
+    zbuf = torch.full((num_pixels,), EMPTY_KEY, dtype=torch.int64, device=depth.device)
     zbuf.scatter_reduce_(0, pixel_index[ok], keys, reduce="amin")
-    face_map = torch.where(zbuf != empty, zbuf & 0xFFFFFFFF, torch.full_like(zbuf, -1))
+    face_map = _faces_of(zbuf)
     winner = keys == zbuf[pixel_index[ok]]                                  # the fragment each pixel kept
     depth_map = torch.full((num_pixels,), float("inf"), dtype=depth.dtype, device=depth.device)
     depth_map[pixel_index[ok][winner]] = depth[ok][winner]
@@ -198,8 +208,10 @@ def _check_inputs(mesh, camera):
         raise ValueError(f"mesh.verts must be a (V, 3) tensor, got {getattr(verts, 'shape', type(verts))}")
     if not isinstance(faces, torch.Tensor) or faces.dim() != 2 or faces.shape[1] != 3:
         raise ValueError(f"mesh.faces must be an (F, 3) tensor, got {getattr(faces, 'shape', type(faces))}")
-    if faces.numel() and (int(faces.min()) < 0 or int(faces.max()) >= verts.shape[0]):
+    if faces.numel() and int(faces.max()) >= verts.shape[0]:
         raise ValueError(f"faces index vertex {int(faces.max())} but the mesh has {verts.shape[0]} vertices")
+    if faces.numel() and int(faces.min()) < 0:
+        raise ValueError(f"faces hold a negative vertex index ({int(faces.min())})")
     if faces.shape[0] >= 2**31:
         raise ValueError("at most 2**31 - 1 faces are supported")
     if not torch.isfinite(verts).all():
@@ -447,8 +459,7 @@ def _chunks(st: _ScreenTriangles, width, height, budget):
 def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
     """Stage 2b: the nearest face per pixel, (H*W,) int64, -1 where none. One scatter-min per chunk."""
     H, W = camera.height, camera.width
-    empty = torch.iinfo(torch.int64).max
-    zbuf = torch.full((H * W,), empty, dtype=torch.int64, device=st.xy.device)
+    zbuf = torch.full((H * W,), EMPTY_KEY, dtype=torch.int64, device=st.xy.device)
     if st.face.numel() == 0:
         return torch.full_like(zbuf, -1)
     for chunk in _chunks(st, W, H, budget):
@@ -457,20 +468,9 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
         if chunk.crosses_far:                                               # the far plane clips per pixel
             ok = (depth <= camera.far).nonzero().squeeze(1)
             pixel, depth, face = pixel[ok], depth[ok], face[ok]
-        if camera.orthographic:                                             # z may round to -0.0 at near = 0
-            depth.clamp_(min=0)
-        zbuf.scatter_reduce_(0, pixel, _depth_keys_positive(depth, face), reduce="amin")
-    return ((zbuf + 1) & 0xFFFFFFFF) - 1                                    # low 32 bits: face id; empty → -1
-
-
-def _depth_keys_positive(depth, face):
-    """``_depth_keys`` for float32 depths known to be >= 0 (no mirroring needed; perspective depths are
-    positive, orthographic ones are clamped by the caller).
-
-    The empty key, int64 max, has all 32 low bits set, so ``((key + 1) & 0xFFFFFFFF) - 1`` reads -1 for an
-    empty pixel and the face id otherwise.
-    """
-    return (depth.view(torch.int32).long() << 32) | face
+        keys = _depth_keys(depth, face, positive=not camera.orthographic)  # orthographic z may round to -0.0
+        zbuf.scatter_reduce_(0, pixel, keys, reduce="amin")
+    return _faces_of(zbuf)
 
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
@@ -530,7 +530,7 @@ def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fragment
     cull_backfaces: skip faces whose vertices appear clockwise to the viewer (front faces are CCW).
     Returns ``Fragments`` of shape (H, W). Coverage follows the top-left fill rule; ties in depth go to the
     lower face id. ``bary`` and ``depth`` are differentiable w.r.t. ``mesh.verts`` and the camera's K, R, t;
-    the choice of visible face is not (lecture 09: why visibility is not differentiable).
+    the choice of visible face is not (lecture 08: why visibility is not differentiable).
     """
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width

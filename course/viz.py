@@ -21,7 +21,7 @@ def to_numpy(x) -> np.ndarray:
 
 
 def image_stats(image) -> str:
-    """One deterministic line that pins an image in a notebook: shape, mean colour, coverage of non-background.
+    """One deterministic line that pins an image in a notebook: its shape and mean colour.
 
     image: (H, W) or (H, W, C). Printed floats are rounded to 4 decimals.
     """

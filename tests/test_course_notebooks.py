@@ -1,5 +1,6 @@
 """The course as shipped: every lecture has its exercise and solution, exercises match a fresh release,
 solutions earn full marks and untouched exercises none, and lectures keep the agreed shape."""
+import re
 from pathlib import Path
 
 import nbformat
@@ -34,7 +35,7 @@ def test_lecture_shape(lecture):
     assert headings[0].startswith(f"# {lecture.name[:2]}")
     for required in ("## Overview", "## You will learn", "## See also"):
         assert required in headings, f"{lecture.name}: no '{required}' heading"
-    steps = [h for h in headings if h[:4] == "## " + h[3:4] and h[3:4].isdigit()]
+    steps = [h for h in headings if re.match(r"## \d+\. ", h)]
     assert len(steps) >= 3, f"{lecture.name}: fewer than three numbered steps"
     for cell in nb.cells:                                                   # committed with outputs
         if cell.cell_type == "code" and cell.source.strip():

@@ -245,12 +245,16 @@ def test_near_clipped_mesh_stays_watertight():
 
 
 def test_far_plane_clips_per_pixel():
-    m = plane(size=40.0, subdivisions=2, dtype=torch.float64)
+    m = plane(size=40.0, subdivisions=2, dtype=torch.float64)               # y = 0, reaching past the far plane
     cam = Camera.look_at((0.0, 1.0, 0.0), (0.0, 0.0, -4.0), fov_y=60, width=24, height=24, far=6.0,
                          dtype=torch.float64)
     fr = rasterize(m, cam)
-    assert fr.mask.any() and (fr.depth[fr.mask] <= 6.0).all()
-    assert (~fr.mask[:12]).all() or fr.mask[:12].sum() < fr.mask[12:].sum()  # horizon region clipped
+    origins, dirs = cam.rays()
+    t = -origins[..., 1] / dirs[..., 1]
+    z = t * (dirs @ cam.R[2])                                               # camera depth of the hit
+    hits = (dirs[..., 1] < 0) & (z <= cam.far)
+    assert hits.any() and (~hits & (dirs[..., 1] < 0)).any()                # the far plane cuts the view
+    assert torch.equal(fr.mask, hits)
 
 
 # ---------------------------------------------------------------------------------------- stress
@@ -376,6 +380,9 @@ def test_bad_inputs_raise_clear_errors():
     bad.faces = bad.faces.clone()
     bad.faces[0, 0] = 99
     with pytest.raises(ValueError, match="vertex 99 but the mesh has 12 vertices"):
+        rasterize(bad, cam)
+    bad.faces[0, 0] = -1
+    with pytest.raises(ValueError, match="negative vertex index"):
         rasterize(bad, cam)
     with pytest.raises(ValueError, match="image size"):
         Camera.look_at((0.0, 0.0, 5.0), fov_y=60, width=0, height=8)
