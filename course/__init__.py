@@ -25,8 +25,8 @@ re-exported here, so that ``course.render`` always names the module.
 """
 from .camera import (Camera, axis_angle_to_matrix, euler_to_matrix, homogeneous, intrinsics_from_fov, look_at,
                      pixel_rays, project_points, transform_points, world_to_camera)
-from .mesh import (Mesh, checker_texture, cube, default_scene_mesh, icosphere, join_meshes, load_mesh, plane,
-                   teapot, torus)
+from .mesh import Mesh, join_meshes, load_mesh
+from .models import checker_texture, cube, default_scene_mesh, icosphere, plane, teapot, torus
 from .raster import Fragments, interpolate, rasterize, rasterize_naive
 from .render import RenderResult, RenderSettings, Scene
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, phong,

@@ -8,8 +8,8 @@ import sys
 COMMANDS = {
     "render": ("course.render", "render a mesh (or the bundled default scene) to a PNG"),
     "bench": ("course.bench", "time against error, side by side"),
-    "grade": ("course.grading", "grade exercise notebooks in fresh kernels"),
-    "release": ("course.release", "write exercises/ from solutions/ (or --check for drift)"),
+    "grade": ("course.grading.grader", "grade exercise notebooks in fresh kernels"),
+    "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),
 }
 
 

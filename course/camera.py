@@ -17,38 +17,12 @@ import math
 
 import torch
 
+from .tensors import _check_shape, as_tensor
+
 __all__ = [
-    "as_tensor", "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
+    "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
     "look_at", "world_to_camera", "project_points", "pixel_rays", "intrinsics_from_fov", "Camera",
 ]
-
-
-def as_tensor(x, *, dtype=None, device=None, name: str = "input") -> torch.Tensor:
-    """Turn ``x`` (tensor, numpy array, list) into a floating tensor, keeping a float dtype it already has."""
-    if isinstance(x, torch.Tensor):
-        t = x
-    else:
-        try:
-            t = torch.as_tensor(x, dtype=dtype)                             # no float32 round trip
-        except Exception as err:  # a ragged list, a string, ...
-            raise TypeError(f"{name} must be a tensor or array of numbers, got {type(x).__name__}") from err
-    if dtype is not None:
-        t = t.to(dtype)
-    elif not t.is_floating_point():
-        t = t.to(torch.get_default_dtype())
-    if device is not None:
-        t = t.to(device)
-    return t
-
-
-def _check_shape(x: torch.Tensor, shape: tuple, name: str) -> None:
-    """Raise a ValueError naming ``name`` unless ``x.shape`` matches ``shape`` (None matches any size)."""
-    ok = x.dim() == len(shape) and all(s is None or s == d for s, d in zip(shape, x.shape))
-    if not ok:
-        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
-        raise ValueError(f"{name} must have shape {want}, got {tuple(x.shape)}")
-    if not torch.isfinite(x).all():
-        raise ValueError(f"{name} contains NaN or inf")
 
 
 # ---------------------------------------------------------------------------------------------- rotations

@@ -11,7 +11,7 @@ Conventions this module relies on (the full list is in DESIGN.md):
 - Colours are floats in [0, 1]. Integer colours (vertex colours or textures) are read as 0..255.
 
 The bundled models (`cube`, `icosphere`, `plane`, `torus`, `teapot`, `checker_texture`,
-`default_scene_mesh`) live in `course.models` and are re-exported here.
+`default_scene_mesh`) live in `course.models`, which builds them with this module's `Mesh`.
 """
 from __future__ import annotations
 
@@ -20,13 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-__all__ = [
-    "Mesh", "join_meshes", "load_mesh",
-    "cube", "icosphere", "plane", "torus", "teapot", "checker_texture", "default_scene_mesh",
-]
+__all__ = ["Mesh", "join_meshes", "load_mesh"]
 
 _FLOAT_DTYPES = (torch.float32, torch.float64)
-_MODEL_NAMES = ("cube", "icosphere", "plane", "torus", "teapot", "checker_texture", "default_scene_mesh")
 
 
 class Mesh:
@@ -372,16 +368,3 @@ def _assemble(**fields) -> Mesh:
     for name in ("verts", "faces", "vert_colors", "vert_normals", "uvs", "texture"):
         setattr(mesh, name, fields.get(name))
     return mesh
-
-
-def __getattr__(name: str):
-    """Re-export the bundled models from `course.models` (imported on first use: models imports Mesh)."""
-    if name in _MODEL_NAMES:
-        from . import models
-
-        return getattr(models, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(list(globals()) + list(_MODEL_NAMES))

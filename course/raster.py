@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import torch
 
-from .camera import Camera, as_tensor, world_to_camera
+from .camera import Camera, world_to_camera
+from .tensors import as_tensor
 
 __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate", "edge_function", "inside_triangle",

@@ -26,13 +26,14 @@ from typing import Optional, Sequence
 
 import torch
 
-from course.camera import Camera, as_tensor
+from course.camera import Camera
 from course.mesh import Mesh
 from course.raster import Fragments, interpolate, rasterize
 from course.shading import (
     AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, normalize,
     phong_shading, sample_texture, wireframe_overlay,
 )
+from course.tensors import as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
            "default_lights", "cli", "SHADING_MODES"]
@@ -420,10 +421,11 @@ def cli(argv: list[str]) -> int:
     except SystemExit as exit_:                                              # --help or a usage error
         return int(exit_.code or 0)
     from course import mesh as mesh_module
+    from course import models
     try:
         width, height = _image_size(args)
         if args.mesh is None:
-            mesh = mesh_module.default_scene_mesh()
+            mesh = models.default_scene_mesh()
         else:
             try:
                 mesh = mesh_module.load_mesh(args.mesh)

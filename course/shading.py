@@ -28,7 +28,7 @@ from typing import Sequence, Union
 
 import torch
 
-from course.camera import as_tensor
+from course.tensors import as_tensor
 
 __all__ = [
     "AmbientLight", "DirectionalLight", "PointLight", "Material",

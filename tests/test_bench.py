@@ -5,7 +5,7 @@ import sys
 import pytest
 import torch
 
-from course.bench import SCENES, _OpenGL, bench_raster, format_table, scene
+from course.bench.raster import SCENES, _OpenGL, bench_raster, format_table, scene
 from course.raster import rasterize
 
 
@@ -52,7 +52,7 @@ def test_opengl_picks_the_same_faces(cull):
 
 
 def test_bench_skips_are_exact(capsys):
-    from course.bench import bench_skips
+    from course.bench.skips import bench_skips
     rows = bench_skips(repeat=1)
     assert len(rows) == 4
     assert all(r["max_diff"] == 0.0 for r in rows), rows                    # every skip leaves the image as is

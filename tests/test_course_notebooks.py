@@ -6,9 +6,9 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from course.grader import grade_notebook
 from course.grading import tasks_for_lecture
-from course.release import cli as release_cli
+from course.grading.grader import grade_notebook
+from course.grading.release import cli as release_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 LECTURES = sorted((ROOT / "lectures").glob("[0-9][0-9]_*.ipynb"))

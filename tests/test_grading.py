@@ -377,6 +377,56 @@ def test_fake_lines_and_monkeypatching_gain_nothing_and_a_deleted_check_cell_is_
     assert results["1.3"]["message"] == "check cell missing"
 
 
+WRONG_ANSWERS = {                                  # each loses points with an honest check
+    "1.1": "def rodrigues(axis_angle):\n    return torch.eye(3, dtype=axis_angle.dtype)",
+    "1.2": "def look_at(eye, target, up):\n    return torch.eye(3, dtype=eye.dtype), -eye",
+    "1.3": "def world_to_camera(points, R, t):\n    return points",
+}
+
+# Patches of the checks' own modules: every comparison passes, every part scores, 1.3 is replaced outright.
+PATCH_CHECKS = """\
+import course.grading.helpers, course.grading.lecture01, course.grading.registry
+full_marks = lambda *parts: (sum(points for points, _, _ in parts), "")
+course.grading.helpers.grade_parts = full_marks
+course.grading.helpers.compare = lambda *args, **kwargs: None
+course.grading.lecture01.grade_parts = full_marks
+course.grading.lecture01.compare = lambda *args, **kwargs: None
+course.grading.lecture01._diagnose = lambda *args, **kwargs: None
+registry = course.grading.registry
+registry.TASKS["1.3"] = registry.Task("1.3", "world_to_camera", 2, lambda impl: (2, ""))
+"""
+
+
+@pytest.mark.timeout(300)
+def test_patching_the_check_modules_in_a_notebook_gains_nothing(tmp_path, monkeypatch):
+    import nbformat
+    from nbformat.v4 import new_code_cell, new_notebook
+
+    from course.grading import lecture01
+    from course.grading.registry import Task
+    answers = {}
+    for source in WRONG_ANSWERS.values():
+        exec(source, {"torch": torch}, answers)
+    honest = {task_id: run_check(task_id, answers[TASKS[task_id].name]).points for task_id in WRONG_ANSWERS}
+    assert all(points < TASKS[task_id].points for task_id, points in honest.items())
+    with monkeypatch.context() as patch:                       # in the process they run in, the patches work
+        patch.setattr(lecture01, "grade_parts", lambda *parts: (sum(p for p, _, _ in parts), ""))
+        patch.setattr(lecture01, "compare", lambda *args, **kwargs: None)
+        patch.setattr(lecture01, "_diagnose", lambda *args, **kwargs: None)
+        patch.setitem(TASKS, "1.3", Task("1.3", "world_to_camera", 2, lambda impl: (2, "")))
+        assert all(run_check(task_id, answers[TASKS[task_id].name]).points == TASKS[task_id].points
+                   for task_id in WRONG_ANSWERS)
+
+    nb = new_notebook(metadata={"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}})
+    nb.cells = [new_code_cell("import torch\nfrom course.grading import check"), new_code_cell(PATCH_CHECKS)]
+    for task_id, source in WRONG_ANSWERS.items():
+        nb.cells += [new_code_cell(source), new_code_cell(f'check("{task_id}", {TASKS[task_id].name})')]
+    path = tmp_path / "01_patched.ipynb"
+    nbformat.write(nb, str(path))
+    results = grade_notebook(path, timeout=120)                # the grader imports the checks afresh
+    assert {r.task: r.points for r in results} == honest
+
+
 @pytest.mark.timeout(120)
 def test_endless_loops_and_syntax_errors_are_graded_without_hanging(tmp_path):
     start = time.perf_counter()

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from course.mesh import (Mesh, checker_texture, cube, default_scene_mesh, icosphere, join_meshes, load_mesh,
-                         plane, teapot, torus)
+from course.mesh import Mesh, join_meshes, load_mesh
+from course.models import checker_texture, cube, default_scene_mesh, icosphere, plane, teapot, torus
 
 SQRT3 = math.sqrt(3.0)
 

@@ -7,7 +7,8 @@ from hypothesis import given, settings, strategies as st
 
 import course.raster as raster
 from course.camera import Camera, axis_angle_to_matrix
-from course.mesh import Mesh, icosphere, cube, plane
+from course.mesh import Mesh
+from course.models import cube, icosphere, plane
 from course.raster import (Fragments, barycentric_2d, edge_function, inside_triangle, interpolate,
                            perspective_correct_bary, rasterize, rasterize_naive, zbuffer_resolve)
 

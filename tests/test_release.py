@@ -8,7 +8,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from course.release import cli, release_notebook, release_source, render_exercise
+from course.grading.release import cli, release_notebook, release_source, render_exercise
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 SOLUTIONS, EXERCISES = FIXTURES / "solutions", FIXTURES / "exercises"

@@ -5,7 +5,8 @@ import torch
 from PIL import Image
 
 from course.camera import Camera
-from course.mesh import Mesh, cube, default_scene_mesh, icosphere, plane
+from course.mesh import Mesh
+from course.models import cube, default_scene_mesh, icosphere, plane
 from course.render import (
     SHADING_MODES, RenderSettings, Scene, cli, default_lights, frame_camera, plan_passes, render,
 )

@@ -1,7 +1,7 @@
-"""Benchmarks: run time against error, side by side in one run.
+"""The rasterizer benchmark: ``python -m course bench raster [--scenes S1 ...] [--vs opengl] [--no-memory]``.
 
-``python -m course bench raster`` times the rasterizer on the four standard scenes (an icosphere of radius 1
-seen from distance 3 with a 40° field of view):
+It times ``rasterize`` on the four standard scenes (an icosphere of radius 1 seen from distance 3 with a 40°
+field of view):
 
 =====  ============  ==========  ========
 scene  subdivisions  faces       image
@@ -16,28 +16,20 @@ and reports the median time, triangles and pixels per second, with and without b
 peak memory of one render (measured in a fresh process). ``--vs opengl`` renders the same scenes with
 OpenGL (moderngl on whatever driver EGL finds, Mesa's llvmpipe on a machine without a GPU) in the same run,
 reports the time ratio, and checks that the two agree on the visible face of every pixel.
-``python -m course bench skips`` times each pass ``render()`` skips (lighting for an unlit scene, texture lookups
-for a silhouette, the autograd graph when nothing requires a gradient, back faces of a closed mesh) against the
-same render with the work forced back on, and reports the largest pixel difference (0: the skip is exact).
-
-Timings are for comparing methods side by side on one machine; tests never assert them.
 """
 from __future__ import annotations
 
-import argparse
-import json
-import statistics
 import subprocess
 import sys
-import time
 
 import torch
 
-from .camera import Camera
-from .mesh import icosphere
-from .raster import rasterize
+from ..camera import Camera
+from ..models import icosphere
+from ..raster import rasterize
+from .timing import time_it, time_side_by_side
 
-__all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "bench_skips", "cli"]
+__all__ = ["SCENES", "scene", "bench_raster", "format_table"]
 
 # name: (icosphere subdivisions, image size)
 SCENES = {"S1": (5, 512), "S2": (7, 512), "S3": (5, 1024), "S4": (3, 256)}
@@ -51,40 +43,13 @@ def scene(name: str, dtype=torch.float32):
     return mesh, camera
 
 
-def time_it(fn, repeat: int, warmup: int = 1) -> float:
-    """Median wall time of ``fn()`` in milliseconds."""
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return 1000 * statistics.median(times)
-
-
-def time_side_by_side(fns, repeat: int, warmup: int = 1) -> list[float]:
-    """Median wall times (ms) of several functions, run in turn inside each repetition, so that a machine
-    slowing down or speeding up during the run affects all of them alike."""
-    for fn in fns:
-        for _ in range(warmup):
-            fn()
-    times = [[] for _ in fns]
-    for _ in range(repeat):
-        for fn, ts in zip(fns, times):
-            start = time.perf_counter()
-            fn()
-            ts.append(time.perf_counter() - start)
-    return [1000 * statistics.median(ts) for ts in times]
-
-
 def _peak_memory_mb(name: str, cull: bool) -> float:
     """Peak resident memory of one render in a fresh process, above the resident memory just before it (MB).
 
     Linux only: the peak (VmHWM) is reset through /proc/self/clear_refs before the render.
     """
     code = (
-        "import torch; from course.bench import scene; from course.raster import rasterize\n"
+        "import torch; from course.bench.raster import scene; from course.raster import rasterize\n"
         f"m, c = scene({name!r})\n"
         "kb = lambda key: int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith(key)))\n"
         "open('/proc/self/clear_refs', 'w').write('5'); base = kb('VmRSS:')\n"
@@ -211,75 +176,3 @@ def format_table(rows) -> str:
             line += f"{r['gl_ms']:>11.2f}{r['ms'] / r['gl_ms']:>7.1f}{100 * r['agree']:>10.2f}%"
         lines.append(line)
     return "\n".join(lines)
-
-
-# -------------------------------------------------------------------------------------------- skips
-
-def _skip_cases():
-    """(name, scene, settings, passes forced back on) — one per skip ``render`` makes."""
-    from .mesh import teapot
-    from .render import RenderSettings, Scene, default_lights, frame_camera
-    mesh = teapot(resolution=12)
-    cam = frame_camera([mesh], width=384, height=384)
-    lit, unlit = Scene(mesh, cam, lights=default_lights()), Scene(mesh, cam)
-    closed = icosphere(6)
-    sphere_cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=384, height=384)
-    return [
-        ("unlit: no normals, no lighting", unlit, RenderSettings(shading="unlit"), ("normals", "lighting")),
-        ("silhouette: no texture lookups", lit, RenderSettings(shading="silhouette"), ("texture",)),
-        ("no grad: no autograd graph", lit, RenderSettings(shading="phong"), ("autograd",)),
-        ("closed mesh: back faces culled", Scene(closed, sphere_cam, lights=default_lights()),
-         RenderSettings(shading="phong", cull_backfaces=True), None),
-    ]
-
-
-def bench_skips(repeat: int = 5, out=print) -> list[dict]:
-    """Each skip of ``render``: time with the skip and with the work forced back on, and the largest pixel
-    difference between the two images (0 means the skip is exact)."""
-    from dataclasses import replace
-
-    from .render import render
-    rows = []
-    for name, sc, settings, forced in _skip_cases():
-        if forced is None:                                                  # the skip is a setting
-            slow_settings, force = replace(settings, cull_backfaces=False), ()
-        else:
-            slow_settings, force = settings, forced
-        fast = render(sc, settings).image
-        slow = render(sc, slow_settings, _force=force).image
-        ms_skip, ms_full = time_side_by_side([lambda: render(sc, settings),
-                                              lambda: render(sc, slow_settings, _force=force)], repeat)
-        rows.append(dict(skip=name, ms_skip=ms_skip, ms_full=ms_full,
-                         max_diff=float((fast.detach() - slow.detach()).abs().max())))
-    head = f"{'skip':<34}{'with skip ms':>14}{'without ms':>12}{'speed-up':>10}{'max |diff|':>12}"
-    lines = [head, "-" * len(head)]
-    lines += [f"{r['skip']:<34}{r['ms_skip']:>14.1f}{r['ms_full']:>12.1f}{r['ms_full'] / r['ms_skip']:>9.2f}×"
-              f"{r['max_diff']:>12.1e}" for r in rows]
-    out("\n".join(lines))
-    return rows
-
-
-# ---------------------------------------------------------------------------------------------- cli
-
-BENCHES = {"raster": "rasterizer on the four standard scenes (S1-S4)",
-           "skips": "each pass render() skips: time with and without, and the image difference"}
-
-
-def cli(argv) -> int:
-    parser = argparse.ArgumentParser(prog="python -m course bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("which", choices=sorted(BENCHES), help="; ".join(f"{k}: {v}" for k, v in BENCHES.items()))
-    parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
-    parser.add_argument("--repeat", type=int, default=7, help="timed runs per measurement (median reported)")
-    parser.add_argument("--vs", choices=["opengl"], help="also render with OpenGL and report the time ratio")
-    parser.add_argument("--no-memory", action="store_true", help="skip the peak-memory measurement")
-    parser.add_argument("--json", help="also write the rows to this JSON file")
-    args = parser.parse_args(argv)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
-    if args.which == "skips":
-        rows = bench_skips(args.repeat)
-    else:
-        rows = bench_raster(args.scenes, args.repeat, vs_opengl=args.vs == "opengl", memory=not args.no_memory)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(rows, fh, indent=1)
-    return 0

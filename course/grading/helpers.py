@@ -1,20 +1,13 @@
-"""Graded exercises: the task records and registry, the helpers checks are written with, and check cells.
+"""The helpers checks are written with: compare results, split points between cases, recognise mistakes.
 
-A **task** is one function a student writes (``Task(id="3.2", name="barycentric", points=2, check=...)``).
-Its check is written once with the implementation passed in, ``check(impl) -> (points, message)``, and
-registered with the ``task`` decorator; the checks of lectures 1–4 live in ``course.checks``, imported at the
-end of this module, so importing ``course.grading`` registers every task. Checks are built from the helpers
-here: ``compare`` says how a result differs ("shape (3,) expected, got (1, 3)", "dtype float64 in, float32
-out"), ``require`` turns that into a ``Fail``, and ``grade_parts`` splits the points between basic and stress
-cases.
+``compare`` says how a result differs ("shape (3,) expected, got (1, 3)", "dtype float64 in, float32 out"),
+``require`` turns that into a ``Fail``, and ``grade_parts`` splits a task's points between basic and stress
+cases. ``_diagnose`` is ``compare`` plus the typical mistakes of a task, each written as the wrong result it
+gives; ``_call`` runs the student's function on copies of the inputs, ``_ref`` imports the package's
+reference when a check runs (so a fresh import is a fresh reference), and ``summarize_exception`` turns
+what the student's code raised into one line that points at the student's own line.
 
-In a notebook a check cell reads ``check("3.2", barycentric)`` and prints one deterministic line,
-``Task 3.2 barycentric: 2/2``, followed by an indented hint only when points are lost. It never crashes the
-notebook: not attempted (``NotImplementedError``), an exception, or a hang (stopped after a time limit)
-all score 0 with a one-line reason.
-
-``python -m course grade NOTEBOOK...`` (``cli``, ``grade_notebook``) scores whole notebooks in fresh kernels;
-it lives in ``course.grader``, which also says how far its scores can be trusted, and is reachable from here.
+The lecture modules (``lecture01`` ...) import from here and from ``registry``; nothing here imports them.
 """
 from __future__ import annotations
 
@@ -22,83 +15,19 @@ import importlib
 import math
 import os
 import re
-import signal
 import sysconfig
-import threading
-import time
 import traceback
-import warnings
-from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import torch
 
-__all__ = [
-    "Task", "Result", "TASKS", "task", "tasks_for_lecture", "Fail", "CheckTimeout", "require", "grade_parts",
-    "to_tensor", "compare", "generator", "summarize_exception", "run_check", "check", "format_result",
-    "grade_notebook", "cli", "DEFAULT_TIMEOUT",
-]
-
-DEFAULT_TIMEOUT = 10.0          # seconds one task check may take in a notebook
-
-
-# ---------------------------------------------------------------------------------- records and registry
-
-@dataclass(frozen=True)
-class Task:
-    """One graded function: ``id`` "3.2" (lecture 3, task 2), ``name`` the function's name in the notebook,
-    ``points`` the maximum, ``check(impl) -> (points_earned, message)``, ``hint`` shown when not attempted."""
-    id: str
-    name: str
-    points: int
-    check: Callable
-    hint: str = ""
-
-
-@dataclass(frozen=True)
-class Result:
-    """The outcome of one check. ``message`` says what to fix ("" when nothing is wrong)."""
-    task: str
-    name: str
-    points: int
-    max_points: int
-    message: str = ""
-    printed: bool = field(default=False, repr=False, compare=False)   # set by check(): shown already
-
-    def _ipython_display_(self):                  # a check cell ending in check(...) shows its line once
-        if not self.printed:
-            print(repr(self))
-
-
-TASKS: dict[str, Task] = {}
-
-
-def task(id: str, name: str, points: int, hint: str = ""):
-    """Decorator registering ``check(impl)`` as the check of task ``id``."""
-    def register(fn):
-        TASKS[id] = Task(id, name, points, fn, hint)
-        return fn
-    return register
-
-
-def _task_key(task_id: str) -> tuple[int, ...]:
-    return tuple(int(part) for part in task_id.split("."))
-
-
-def tasks_for_lecture(number: int) -> list[Task]:
-    """The registered tasks of lecture ``number`` (the ``NN`` of ``NN_topic.ipynb``), in id order."""
-    return sorted((t for t in TASKS.values() if _task_key(t.id)[0] == int(number)), key=lambda t: _task_key(t.id))
+__all__ = ["Fail", "require", "generator", "grade_parts", "to_tensor", "compare", "summarize_exception"]
 
 
 # ------------------------------------------------------------------------- helpers for writing checks
 
 class Fail(Exception):
     """A check found a problem; the message is what the student reads."""
-
-
-class CheckTimeout(BaseException):
-    """A check ran past its time limit (a BaseException, so ``except Exception`` in student code can't eat it)."""
 
 
 def require(message: str | None) -> None:
@@ -266,7 +195,7 @@ def _unpack(out, names: tuple[str, ...], fn: str):
 
 _LIBRARY_DIRS = tuple({os.path.realpath(p) for key, p in sysconfig.get_paths().items()
                        if key in ("stdlib", "platstdlib", "purelib", "platlib")}
-                      | {os.path.dirname(os.path.realpath(__file__))})
+                      | {os.path.dirname(os.path.dirname(os.path.realpath(__file__)))})   # course/
 
 
 def _is_library(filename: str) -> bool:
@@ -306,106 +235,6 @@ def _ref(module: str, name: str):
         raise RuntimeError(f"grader error: reference {module}.{name} is not available ({err})") from None
 
 
-# --------------------------------------------------------------------------------- running one check
-
-def _call_with_time_limit(fn, seconds):
-    """``fn()``, stopped by ``CheckTimeout`` after ``seconds``. SIGALRM in the main thread (a kernel runs cells
-    there); elsewhere the call runs in a daemon thread, which is asked to stop if it overruns."""
-    if not seconds or seconds <= 0:
-        return fn()
-    if hasattr(signal, "SIGALRM") and threading.current_thread() is threading.main_thread():
-        def on_alarm(signum, frame):
-            raise CheckTimeout(seconds)
-        previous = signal.signal(signal.SIGALRM, on_alarm)
-        start = time.monotonic()
-        outer_delay, outer_interval = signal.setitimer(signal.ITIMER_REAL, seconds)   # a timer already set
-        try:                                                                          # (pytest-timeout, ...)
-            return fn()
-        finally:
-            signal.setitimer(signal.ITIMER_REAL, 0)
-            signal.signal(signal.SIGALRM, previous if previous is not None else signal.SIG_DFL)
-            if outer_delay > 0:                                                       # is set again
-                remaining = max(outer_delay - (time.monotonic() - start), 1e-3)
-                signal.setitimer(signal.ITIMER_REAL, remaining, outer_interval)
-    box: dict = {}
-
-    def target():
-        try:
-            box["value"] = fn()
-        except BaseException as exc:                                      # re-raised in the caller's thread
-            box["error"] = exc
-    worker = threading.Thread(target=target, daemon=True, name="course-check")
-    worker.start()
-    worker.join(seconds)
-    if worker.is_alive():
-        _stop_thread(worker)
-        raise CheckTimeout(seconds)
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
-
-
-def _stop_thread(worker: threading.Thread) -> None:
-    """Ask a runaway check thread to stop: CPython raises CheckTimeout in it at its next Python bytecode
-    (a loop inside one long C call runs on until that call returns)."""
-    try:
-        import ctypes
-        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(worker.ident), ctypes.py_object(CheckTimeout))
-    except (ImportError, AttributeError):                                  # not CPython: leave it running
-        pass
-    worker.join(0.1)
-
-
-def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
-    """Score ``impl`` on task ``task_id``; never raises for anything the student's code does."""
-    t = TASKS.get(str(task_id))
-    if t is None:
-        raise ValueError(f"unknown task {task_id!r}; known tasks: {', '.join(sorted(TASKS, key=_task_key))}")
-    if impl is None or not callable(impl):
-        return Result(t.id, t.name, 0, t.points, f"{t.name} is not a function (got {type(impl).__name__})")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")                               # keep check output deterministic
-            points, message = _call_with_time_limit(lambda: t.check(impl), timeout)
-    except NotImplementedError as exc:
-        if not _not_attempted(exc):
-            return Result(t.id, t.name, 0, t.points, summarize_exception(exc))
-        hint = t.hint or f"write {t.name}, replacing `raise NotImplementedError()`"
-        return Result(t.id, t.name, 0, t.points, f"not attempted yet: {hint}")
-    except CheckTimeout:
-        return Result(t.id, t.name, 0, t.points,
-                      f"stopped after {timeout:g} s: {t.name} did not finish (an endless loop?)")
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:                                          # incl. SystemExit from exit()
-        return Result(t.id, t.name, 0, t.points, summarize_exception(exc))
-    points = max(0, min(int(points), t.points))
-    return Result(t.id, t.name, points, t.points, message if points < t.points else "")
-
-
-def format_result(result: Result) -> str:
-    """``Task 3.2 barycentric: 1/2``, then the message indented on a second line when points were lost."""
-    line = f"Task {result.task} {result.name}: {result.points}/{result.max_points}"
-    if result.message and (result.points < result.max_points or not result.max_points):
-        line += "\n    " + result.message
-    return line
-
-
-def check(task_id: str, impl, *, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
-    """For notebook check cells: print the score line (and a hint if points were lost); return the Result."""
-    try:
-        result = run_check(task_id, impl, timeout=timeout)
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:                                          # unknown id, a broken grader, ...
-        t = TASKS.get(str(task_id))
-        result = Result(str(task_id), t.name if t else getattr(impl, "__name__", "?"), 0,
-                        t.points if t else 0, f"could not check: {summarize_exception(exc)}")
-    result = Result(result.task, result.name, result.points, result.max_points, result.message, printed=True)
-    print(format_result(result))
-    return result
-
-
 # ------------------------------------------------------------------------- typical mistakes, recognised
 
 def _diagnose(got, expected, name: str, variants=(), *, check_dtype: bool = False, **tol) -> str | None:
@@ -422,16 +251,3 @@ def _diagnose(got, expected, name: str, variants=(), *, check_dtype: bool = Fals
 def _call(impl, *args):
     """Call the student's function on copies, so an in-place edit can't change the reference's inputs."""
     return impl(*(a.clone() if isinstance(a, torch.Tensor) else a for a in args))
-
-
-# ------------------------------------------------------------------------ the notebook grader, the checks
-
-def __getattr__(name: str):
-    """``grade_notebook`` and ``cli`` live in ``course.grader`` (which imports this module), loaded on first use."""
-    if name in ("grade_notebook", "cli"):
-        from . import grader
-        return getattr(grader, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-from . import checks  # noqa: E402,F401  (last: it registers the tasks with the helpers defined above)

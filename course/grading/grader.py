@@ -5,17 +5,17 @@ in a fresh ``python3`` kernel, keeps going past cells that raise or hang, then s
 
 How far the grader can be trusted
 ---------------------------------
-The printed score lines are never read. After a notebook has run, the grader executes one more cell in
-the same kernel: it drops every ``course`` module from ``sys.modules``, imports a fresh ``course.grader``
-(and, through it, fresh ``course.grading``, ``course.checks`` and reference implementations) from the same
-installation as the grader, looks the task functions up by name in the notebook's namespace, runs each
-check under its time limit, and prints the results as JSON tagged with a random nonce created for this
-run. Tasks come from the notebook's ``NN_`` prefix and the registry, never from the notebook, and a task
-whose check cell was deleted scores 0 ("check cell missing"). So printing fake score lines, deleting or
-editing check cells, and monkeypatching ``course.grading`` (``check``, ``run_check``, ``TASKS``),
-``course.checks``, ``course.grader`` or the references in ``course.camera``, ``course.raster``,
-``course.shading`` gain nothing. Results returned as tensor subclasses are turned into plain tensors before
-they are compared.
+The printed score lines are never read. After a notebook has run, the grader executes one more cell in the
+same kernel: it drops every ``course`` module from ``sys.modules``, imports a fresh ``course.grading.grader``
+(and, through it, fresh ``course.grading`` with its ``registry``, ``helpers`` and ``lecture01`` ... modules,
+and reference implementations) from the same installation as the grader, looks the task functions up by name
+in the notebook's namespace, runs each check under its time limit, and prints the results as JSON tagged with
+a random nonce created for this run. Tasks come from the notebook's ``NN_`` prefix and the registry, never
+from the notebook, and a task whose check cell was deleted scores 0 ("check cell missing"). So printing fake
+score lines, deleting or editing check cells, and monkeypatching ``course.grading`` (``check``,
+``run_check``, ``TASKS``), its modules (``course.grading.helpers``, ``course.grading.lecture03``,
+``course.grading.grader``, ...) or the references in ``course.camera``, ``course.raster``, ``course.shading``
+gain nothing. Results returned as tensor subclasses are turned into plain tensors before they are compared.
 
 What it does not protect against: the student's functions run in the grader's process, unsandboxed. Code
 written to attack the grader (patching torch, numpy or builtins, installing import hooks or IPython
@@ -37,8 +37,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .grading import (DEFAULT_TIMEOUT, TASKS, Result, Task, _task_key, run_check, summarize_exception,
-                      tasks_for_lecture)
+from .helpers import summarize_exception
+from .registry import DEFAULT_TIMEOUT, TASKS, Result, Task, _task_key, run_check, tasks_for_lecture
 from .release import CHECK_CALL
 
 __all__ = ["grade_notebook", "cli"]
@@ -46,7 +46,7 @@ __all__ = ["grade_notebook", "cli"]
 
 # ----------------------------------------------------------------------------- grading whole notebooks
 
-_PACKAGE_ROOT = str(Path(__file__).resolve().parent.parent)      # the directory that holds course/
+_PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])        # the directory that holds course/
 _GRADER_TAG = "course-grader"
 
 # Runs in the student's kernel after every cell of the notebook. Fresh imports, so patches of course.* made
@@ -57,8 +57,9 @@ def _course_grader_run(nonce, task_ids, timeout, package_root):
     for name in [name for name in sys.modules if name == "course" or name.startswith("course.")]:
         del sys.modules[name]
     sys.path.insert(0, package_root)
-    grader = importlib.import_module("course.grader")
-    if os.path.realpath(os.path.dirname(os.path.dirname(grader.__file__))) != os.path.realpath(package_root):
+    grader = importlib.import_module("course.grading.grader")
+    root = os.path.dirname(os.path.dirname(os.path.dirname(grader.__file__)))      # .../course/grading/grader.py
+    if os.path.realpath(root) != os.path.realpath(package_root):
         raise RuntimeError("course was imported from " + grader.__file__)
     results = grader._grade_namespace(globals(), task_ids, timeout)
     sys.stdout.write("\\n" + nonce + " " + json.dumps(results) + "\\n")

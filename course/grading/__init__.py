@@ -1,0 +1,29 @@
+"""Graded exercises: what a notebook's check cell imports, and the tasks of every lecture, registered.
+
+In a notebook a check cell reads ``from course.grading import check`` and ``check("3.2", barycentric)``, and
+prints one deterministic line, ``Task 3.2 barycentric: 2/2``, followed by an indented hint only when points
+are lost. It never crashes the notebook: not attempted (``NotImplementedError``), an exception, or a hang
+(stopped after a time limit) all score 0 with a one-line reason.
+
+The package, one module per job; each imports only the modules above it in this list, never this one::
+
+    helpers.py     the helpers checks are written with: compare, require / Fail, grade_parts, _diagnose, ...
+    registry.py    Task, Result, the TASKS registry and its ``task`` decorator, run_check, check, format_result
+    lecture01.py   the checks of lecture 1's tasks (1.1-1.3), registered on import; likewise lecture02-04
+    release.py     ``python -m course release``: exercises/ written from solutions/
+    grader.py      ``python -m course grade``: whole notebooks scored in fresh kernels (and how far to trust it)
+
+Importing ``course.grading`` imports all of them, so every task is registered; the names below are the ones
+notebooks, tests and the command line use.
+"""
+from .helpers import Fail, compare, generator, grade_parts, require, summarize_exception, to_tensor
+from .registry import (DEFAULT_TIMEOUT, TASKS, CheckTimeout, Result, Task, check, format_result, run_check, task,
+                       tasks_for_lecture)
+from . import lecture01, lecture02, lecture03, lecture04  # noqa: F401  (importing them registers every task)
+from .grader import cli, grade_notebook
+
+__all__ = [
+    "Task", "Result", "TASKS", "task", "tasks_for_lecture", "Fail", "CheckTimeout", "require", "grade_parts",
+    "to_tensor", "compare", "generator", "summarize_exception", "run_check", "check", "format_result",
+    "grade_notebook", "cli", "DEFAULT_TIMEOUT",
+]

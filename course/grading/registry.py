@@ -1,0 +1,178 @@
+"""Tasks, the registry, and running one check: ``Task``, ``TASKS``, ``task``, ``run_check``, ``check``.
+
+A **task** is one function a student writes (``Task(id="3.2", name="barycentric", points=2, check=...)``).
+Its check is written once with the implementation passed in, ``check(impl) -> (points, message)``, and
+registered with the ``task`` decorator by the lecture modules (``lecture01`` ...).
+
+``run_check`` scores one implementation and never raises for anything the student's code does: not
+attempted (``NotImplementedError``), an exception, or a hang (stopped after a time limit) all score 0
+with a one-line reason. ``check`` is the notebook's check cell: it prints ``Task 3.2 barycentric: 2/2``,
+followed by an indented hint only when points are lost.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Callable
+
+from .helpers import _not_attempted, summarize_exception
+
+__all__ = ["DEFAULT_TIMEOUT", "Task", "Result", "TASKS", "task", "tasks_for_lecture", "CheckTimeout", "run_check",
+           "format_result", "check"]
+
+DEFAULT_TIMEOUT = 10.0          # seconds one task check may take in a notebook
+
+
+# ---------------------------------------------------------------------------------- records and registry
+
+@dataclass(frozen=True)
+class Task:
+    """One graded function: ``id`` "3.2" (lecture 3, task 2), ``name`` the function's name in the notebook,
+    ``points`` the maximum, ``check(impl) -> (points_earned, message)``, ``hint`` shown when not attempted."""
+    id: str
+    name: str
+    points: int
+    check: Callable
+    hint: str = ""
+
+
+@dataclass(frozen=True)
+class Result:
+    """The outcome of one check. ``message`` says what to fix ("" when nothing is wrong)."""
+    task: str
+    name: str
+    points: int
+    max_points: int
+    message: str = ""
+    printed: bool = field(default=False, repr=False, compare=False)   # set by check(): shown already
+
+    def _ipython_display_(self):                  # a check cell ending in check(...) shows its line once
+        if not self.printed:
+            print(repr(self))
+
+
+TASKS: dict[str, Task] = {}
+
+
+def task(id: str, name: str, points: int, hint: str = ""):
+    """Decorator registering ``check(impl)`` as the check of task ``id``."""
+    def register(fn):
+        TASKS[id] = Task(id, name, points, fn, hint)
+        return fn
+    return register
+
+
+def _task_key(task_id: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in task_id.split("."))
+
+
+def tasks_for_lecture(number: int) -> list[Task]:
+    """The registered tasks of lecture ``number`` (the ``NN`` of ``NN_topic.ipynb``), in id order."""
+    return sorted((t for t in TASKS.values() if _task_key(t.id)[0] == int(number)), key=lambda t: _task_key(t.id))
+
+
+# --------------------------------------------------------------------------------- running one check
+
+class CheckTimeout(BaseException):
+    """A check ran past its time limit (a BaseException, so ``except Exception`` in student code can't eat it)."""
+
+
+def _call_with_time_limit(fn, seconds):
+    """``fn()``, stopped by ``CheckTimeout`` after ``seconds``. SIGALRM in the main thread (a kernel runs cells
+    there); elsewhere the call runs in a daemon thread, which is asked to stop if it overruns."""
+    if not seconds or seconds <= 0:
+        return fn()
+    if hasattr(signal, "SIGALRM") and threading.current_thread() is threading.main_thread():
+        def on_alarm(signum, frame):
+            raise CheckTimeout(seconds)
+        previous = signal.signal(signal.SIGALRM, on_alarm)
+        start = time.monotonic()
+        outer_delay, outer_interval = signal.setitimer(signal.ITIMER_REAL, seconds)   # a timer already set
+        try:                                                                          # (pytest-timeout, ...)
+            return fn()
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, previous if previous is not None else signal.SIG_DFL)
+            if outer_delay > 0:                                                       # is set again
+                remaining = max(outer_delay - (time.monotonic() - start), 1e-3)
+                signal.setitimer(signal.ITIMER_REAL, remaining, outer_interval)
+    box: dict = {}
+
+    def target():
+        try:
+            box["value"] = fn()
+        except BaseException as exc:                                      # re-raised in the caller's thread
+            box["error"] = exc
+    worker = threading.Thread(target=target, daemon=True, name="course-check")
+    worker.start()
+    worker.join(seconds)
+    if worker.is_alive():
+        _stop_thread(worker)
+        raise CheckTimeout(seconds)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _stop_thread(worker: threading.Thread) -> None:
+    """Ask a runaway check thread to stop: CPython raises CheckTimeout in it at its next Python bytecode
+    (a loop inside one long C call runs on until that call returns)."""
+    try:
+        import ctypes
+        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(worker.ident), ctypes.py_object(CheckTimeout))
+    except (ImportError, AttributeError):                                  # not CPython: leave it running
+        pass
+    worker.join(0.1)
+
+
+def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
+    """Score ``impl`` on task ``task_id``; never raises for anything the student's code does."""
+    t = TASKS.get(str(task_id))
+    if t is None:
+        raise ValueError(f"unknown task {task_id!r}; known tasks: {', '.join(sorted(TASKS, key=_task_key))}")
+    if impl is None or not callable(impl):
+        return Result(t.id, t.name, 0, t.points, f"{t.name} is not a function (got {type(impl).__name__})")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")                               # keep check output deterministic
+            points, message = _call_with_time_limit(lambda: t.check(impl), timeout)
+    except NotImplementedError as exc:
+        if not _not_attempted(exc):
+            return Result(t.id, t.name, 0, t.points, summarize_exception(exc))
+        hint = t.hint or f"write {t.name}, replacing `raise NotImplementedError()`"
+        return Result(t.id, t.name, 0, t.points, f"not attempted yet: {hint}")
+    except CheckTimeout:
+        return Result(t.id, t.name, 0, t.points,
+                      f"stopped after {timeout:g} s: {t.name} did not finish (an endless loop?)")
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:                                          # incl. SystemExit from exit()
+        return Result(t.id, t.name, 0, t.points, summarize_exception(exc))
+    points = max(0, min(int(points), t.points))
+    return Result(t.id, t.name, points, t.points, message if points < t.points else "")
+
+
+def format_result(result: Result) -> str:
+    """``Task 3.2 barycentric: 1/2``, then the message indented on a second line when points were lost."""
+    line = f"Task {result.task} {result.name}: {result.points}/{result.max_points}"
+    if result.message and (result.points < result.max_points or not result.max_points):
+        line += "\n    " + result.message
+    return line
+
+
+def check(task_id: str, impl, *, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
+    """For notebook check cells: print the score line (and a hint if points were lost); return the Result."""
+    try:
+        result = run_check(task_id, impl, timeout=timeout)
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:                                          # unknown id, a broken grader, ...
+        t = TASKS.get(str(task_id))
+        result = Result(str(task_id), t.name if t else getattr(impl, "__name__", "?"), 0,
+                        t.points if t else 0, f"could not check: {summarize_exception(exc)}")
+    result = Result(result.task, result.name, result.points, result.max_points, result.message, printed=True)
+    print(format_result(result))
+    return result
