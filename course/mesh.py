@@ -190,14 +190,14 @@ def _texture_atlas(meshes):
 
 
 # ---- loading ---------------------------------------------------------------------------------
-def load_mesh(path, *, dtype=torch.float32, device=None) -> Mesh:
+def load_mesh(path, *, dtype=None, device=None) -> Mesh:
     """Read a triangle mesh from any file trimesh reads (OBJ, PLY, STL, GLB / glTF, OFF, ...).
 
     A file holding several objects (a scene) becomes one mesh (trimesh packs their textures into one
     atlas). Kept from the file: per-vertex uvs and the texture image (OBJ + MTL, glTF), and per-vertex
     colours (PLY, glTF); polygons are triangulated; STL corners are merged into shared vertices.
     Normals are not read: `Mesh.vertex_normals` computes them from the geometry. Texture values are
-    used as stored (no sRGB decoding).
+    used as stored (no sRGB decoding). ``dtype`` defaults to torch's default dtype (float32 unless changed).
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
@@ -222,7 +222,7 @@ def load_mesh(path, *, dtype=torch.float32, device=None) -> Mesh:
         raise ValueError(f"mesh file {path} holds no triangles ({len(loaded.vertices)} vertices, "
                          f"{len(loaded.faces)} faces)")
     attributes = _trimesh_visuals(loaded)
-    verts = torch.as_tensor(np.asarray(loaded.vertices), dtype=dtype, device=device)
+    verts = torch.as_tensor(np.asarray(loaded.vertices), dtype=dtype or torch.get_default_dtype(), device=device)
     faces = torch.as_tensor(np.asarray(loaded.faces, dtype=np.int64), device=device)
     return Mesh(verts, faces, **attributes)
 

@@ -1,7 +1,8 @@
 """Bundled models: primitives, a checker texture and the Utah teapot. Nothing is downloaded.
 
 All meshes follow the course conventions: +y up, faces counter-clockwise seen from outside (so every
-face normal points out), uvs with u right and v up. Every function takes ``dtype`` and ``device``.
+face normal points out), uvs with u right and v up. Every function takes ``dtype`` (default: torch's default
+dtype, float32 unless ``torch.set_default_dtype`` changed it) and ``device``.
 
 Closed surfaces stay crack-free: where a uv seam needs two copies of a vertex (torus, teapot), the
 copies sit at bit-identical positions, so a rasterizer sees no gap.
@@ -24,6 +25,8 @@ _DATA = Path(__file__).parent / "data"
 
 def _to_mesh(verts, faces, dtype, device, uvs=None, texture=None) -> Mesh:
     """A Mesh from numpy arrays (the texture may already be a tensor), in ``dtype`` on ``device``."""
+    dtype = dtype or torch.get_default_dtype()
+
     def as_float(x):
         return None if x is None else torch.as_tensor(x, dtype=dtype, device=device)
 
@@ -53,7 +56,7 @@ def _grid_faces(rows: int, cols: int) -> np.ndarray:
 
 
 # ---- primitives ------------------------------------------------------------------------------
-def cube(size: float = 2.0, *, dtype=torch.float32, device=None) -> Mesh:
+def cube(size: float = 2.0, *, dtype=None, device=None) -> Mesh:
     """Axis-aligned cube centred at the origin with edge ``size``: 8 shared vertices, 12 faces.
 
     The corners are shared so the cube is closed (every edge in exactly two faces), which
@@ -96,7 +99,7 @@ def _subdivide_sphere(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return np.concatenate([verts, mid]), children.reshape(-1, 3)
 
 
-def icosphere(subdivisions: int = 3, radius: float = 1.0, *, dtype=torch.float32, device=None) -> Mesh:
+def icosphere(subdivisions: int = 3, radius: float = 1.0, *, dtype=None, device=None) -> Mesh:
     """Sphere from an icosahedron split ``subdivisions`` times: 20 * 4**s faces, 10 * 4**s + 2 vertices.
 
     Closed and outward-facing; subdivisions 3, 5, 7 give 1280, 20480 and 327680 faces. No uvs.
@@ -109,7 +112,7 @@ def icosphere(subdivisions: int = 3, radius: float = 1.0, *, dtype=torch.float32
     return _to_mesh(verts * radius, faces, dtype, device)
 
 
-def plane(size: float = 2.0, subdivisions: int = 1, *, dtype=torch.float32, device=None) -> Mesh:
+def plane(size: float = 2.0, subdivisions: int = 1, *, dtype=None, device=None) -> Mesh:
     """Square of side ``size`` in the xz plane (y = 0), facing +y, split into subdivisions² quads.
 
     uvs: u runs along +x and v along -z, so seen from above (+x right) the texture is not mirrored
@@ -125,7 +128,7 @@ def plane(size: float = 2.0, subdivisions: int = 1, *, dtype=torch.float32, devi
 
 
 def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: int = 24,
-          *, dtype=torch.float32, device=None) -> Mesh:
+          *, dtype=None, device=None) -> Mesh:
     """Ring torus around the y axis: tube radius ``minor`` at distance ``major``, with uvs.
 
     u goes once around the y axis (counter-clockwise seen from above), v once around the tube.
@@ -142,7 +145,7 @@ def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: i
     return _to_mesh(verts, _grid_faces(n_minor, n_major), dtype, device, uvs=uvs)
 
 
-def checker_texture(size: int = 256, checks: int = 8, *, dtype=torch.float32, device=None) -> torch.Tensor:
+def checker_texture(size: int = 256, checks: int = 8, *, dtype=None, device=None) -> torch.Tensor:
     """(size, size, 3) colourful checkerboard whose orientation shows in every render.
 
     Red grows with u (left to right), green with v (bottom to top), blue marks the dark checks, and
@@ -159,7 +162,7 @@ def checker_texture(size: int = 256, checks: int = 8, *, dtype=torch.float32, de
     image[dark] = 0.45 * image[dark] + np.array([0.0, 0.0, 0.45])
     marker = (np.abs(u * checks - 0.5) < 0.3) & (np.abs(v * checks - 0.5) < 0.3)
     image[marker] = 1.0
-    return torch.as_tensor(image, dtype=dtype, device=device)
+    return torch.as_tensor(image, dtype=dtype or torch.get_default_dtype(), device=device)
 
 
 # ---- the Utah teapot ---------------------------------------------------------------------------
@@ -201,7 +204,7 @@ def _weld(verts: np.ndarray, uvs: np.ndarray, faces: np.ndarray):
     return verts[first][used], uvs[first][used], remap[faces]
 
 
-def teapot(resolution: int = 8, *, dtype=torch.float32, device=None) -> Mesh:
+def teapot(resolution: int = 8, *, dtype=None, device=None) -> Mesh:
     """The Utah teapot (Newell 1975): 32 bicubic Bezier patches, each a resolution x resolution grid.
 
     Turned from the data's z up to +y up (spout toward +x), centred on its bounding box and scaled
@@ -234,6 +237,6 @@ def teapot(resolution: int = 8, *, dtype=torch.float32, device=None) -> Mesh:
     return _to_mesh(verts, faces, dtype, device, uvs=uvs, texture=checker_texture(dtype=dtype, device=device))
 
 
-def default_scene_mesh(*, dtype=torch.float32, device=None) -> Mesh:
+def default_scene_mesh(*, dtype=None, device=None) -> Mesh:
     """The mesh `python -m course render` draws when given none: the textured teapot."""
     return teapot(dtype=dtype, device=device)
