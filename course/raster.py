@@ -16,7 +16,8 @@ The pipeline of ``rasterize`` in four named stages::
   ``(float32 depth bits << 32) | face id`` and a single scatter-min keeps the nearest; ties go to the lower
   face id, deterministically.
 * **Perspective-correct barycentrics and depth** are computed last, only for the visible face of each pixel,
-  by intersecting the pixel's ray with that face's plane in camera space. This stage is written in plain
+  by intersecting the pixel's ray with that face in camera space (Cramer's rule on the face's edges, written
+  so that float32 stays accurate on sub-pixel triangles and far from the origin). This stage is written in plain
   differentiable torch, so gradients flow to the vertex positions and to the camera (K, R, t).
 
 Triangles crossing the near plane are clipped in camera space (not dropped), triangles behind the camera
@@ -479,12 +480,25 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
 def _visible_surface(face_map, verts, faces, camera, H, W):
     """Perspective-correct barycentrics and depth of the visible face at each covered pixel.
 
-    The pixel's ray (origin o, direction d, camera space) meets the plane of a face with vertices v_k at
-    the point whose barycentrics are signed volumes, ``w_k ∝ d · ((v_{k+1} - o) × (v_{k+2} - o))``, and
-    whose depth is ``Σ w_k z_k / Σ w_k``. For a pinhole camera o = 0 and ``d = K⁻¹ p`` with the pixel centre
-    ``p = (x, y, 1)``, so ``w_k = p · (K⁻ᵀ (v_{k+1} × v_{k+2}))``: each face turns into a 3×3 matrix once and
-    each pixel costs one small matrix-vector product (an orthographic camera gives the same form).
-    Plain torch: differentiable w.r.t. verts, K, R and t.
+    The pixel's ray ``o + s d`` (camera space) meets the face v0, v1, v2 at the point
+    ``v0 + b1 e1 + b2 e2`` with edges ``e1 = v1 - v0``, ``e2 = v2 - v0``. Cramer's rule gives the barycentrics
+    as ratios of signed volumes (the Möller–Trumbore form), with ``T = o - v0``::
+
+        b1 = d · (T × e2) / d · (e1 × e2),    b2 = d · (e1 × T) / d · (e1 × e2),    b0 = 1 - b1 - b2
+
+    and the depth as the hit point's z, ``z0 + b1 e1_z + b2 e2_z``. For a pinhole camera ``o = 0`` and
+    ``d = K⁻¹ p`` with the pixel centre ``p = (x, y, 1)``; for an orthographic one ``o = (K⁻¹ p)_xy`` and
+    ``d = +z``. Either way each numerator is linear in p, so every face turns into a 3×3 matrix once and
+    each pixel costs one small matrix-vector product.
+
+    Why this form (float32 accuracy, ``tests/test_raster_precision.py``): every cross product involves at
+    least one *edge*, never two vertex positions, so nothing cancels when a triangle is small and far away
+    (``v1 × v2`` of two nearly parallel vectors of length D loses ``D / |e|`` of its digits); the edges are
+    differences of world positions, rotated but not translated; ``v0 = R x0 + t`` is formed in float64,
+    because far from the origin ``R x0`` and ``t`` are large and nearly cancel; ``d`` is formed from the pixel's
+    offset to the principal point; and the depth is ``z0`` plus a small correction, which stays accurate where
+    the weights are not. float32 depth then lands within a few float32 epsilons of the float64 result,
+    wherever the scene sits. Plain torch: differentiable w.r.t. verts, K, R and t.
     """
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     device = verts.device
@@ -497,25 +511,35 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
         seen = torch.bincount(face, minlength=faces.shape[0]) > 0
         used = seen.nonzero().squeeze(1)                                    # (U,)
         row_of_face = (torch.cumsum(seen, 0) - 1).index_select(0, face)
-    verts_cam = world_to_camera(verts.to(dtype), R, t)                      # (V, 3)
-    v = verts_cam[faces if used is None else faces.index_select(0, used)]   # (U, 3, 3)
-    v1, v2 = v.roll(-1, dims=1), v.roll(-2, dims=1)                         # v_{k+1}, v_{k+2}
-    c = torch.linalg.cross(v1, v2)                                          # (U, 3, 3) rows c_k
-    if camera.orthographic:                                                 # o = (K⁻¹p).xy, d = +z
-        e = v2 - v1
-        c = torch.stack([-e[..., 1], e[..., 0], c[..., 2]], -1)
-    rows = c @ torch.linalg.inv(K)                                          # (U, 3, 3): w_k = rows_k · p
-    table = torch.cat([rows, (v[..., 2:] * rows).sum(1, keepdim=True)], 1)  # (U, 4, 3): w_0, w_1, w_2, Σ z w
-    tab = table.transpose(1, 2).contiguous().index_select(0, row_of_face)   # (M, 3, 4): coefficients of x, y, 1
+    v_world = verts.to(dtype)[faces if used is None else faces.index_select(0, used)]   # (U, 3, 3)
+    # camera-space v0 in float64: R x + t cancels digits when the scene sits far from the origin
+    v0 = world_to_camera(v_world[:, 0].double(), R.double(), t.double()).to(dtype)   # (U, 3)
+    e1 = (v_world[:, 1] - v_world[:, 0]) @ R.T                              # (U, 3) edges, rotated only
+    e2 = (v_world[:, 2] - v_world[:, 0]) @ R.T
+    if camera.orthographic:                                                 # d = +z: only z of each cross
+        zero = torch.zeros_like(e1[:, 0])
+        c = torch.stack([torch.stack([e2[:, 1], -e2[:, 0], torch.linalg.cross(e2, v0)[:, 2]], -1),
+                         torch.stack([-e1[:, 1], e1[:, 0], torch.linalg.cross(v0, e1)[:, 2]], -1),
+                         torch.stack([zero, zero, torch.linalg.cross(e1, e2)[:, 2]], -1)], 1)
+    else:                                                                   # T = -v0
+        c = torch.stack([torch.linalg.cross(e2, v0), torch.linalg.cross(v0, e1), torch.linalg.cross(e1, e2)], 1)
+    z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)                      # (U, 3) z0, e1_z, e2_z
+    table = torch.cat([c.reshape(-1, 9), z], 1)                             # (U, 12)
+    tab = table.index_select(0, row_of_face)                                # (M, 12)
     pix_d = pix.double()
     row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
-    px = (pix_d - row * W + 0.5).to(dtype)[:, None]                         # pixel centres
-    py = (row + 0.5).to(dtype)[:, None]
-    wz = tab[:, 0] * px + tab[:, 1] * py + tab[:, 2]                        # (M, 4)
-    s = wz[:, :3].sum(1, keepdim=True)                                      # Σ w
+    px = (pix_d - row * W + 0.5).to(dtype)                                  # (M,) pixel centres
+    py = (row + 0.5).to(dtype)
+    # d = K⁻¹ p, written K⁻¹ (p - K e3) + e3 so that p - (cx, cy, 1) is formed first, exactly
+    q = torch.stack([px - K[0, 2], py - K[1, 2], (1 - K[2, 2]).expand_as(px)], 1)   # (M, 3)
+    d = q @ torch.linalg.inv(K).T + torch.tensor([0, 0, 1], dtype=dtype, device=device)   # (M, 3) K⁻¹ p
+    w = (tab[:, :9].view(-1, 3, 3) * d[:, None, :]).sum(-1)                 # (M, 3): w1, w2, Σw
+    s = w[:, 2:]
     tiny = torch.finfo(dtype).tiny ** 0.5
     s = torch.where(s.abs() < tiny, torch.full_like(s, tiny), s)            # edge-on faces: stay finite
-    bary, depth = wz[:, :3] / s, wz[:, 3] / s[:, 0]
+    b12 = w[:, :2] / s                                                      # (M, 2)
+    bary = torch.cat([1 - b12.sum(1, keepdim=True), b12], 1)                # (M, 3)
+    depth = tab[:, 9] + (b12 * tab[:, 10:12]).sum(1)                        # z0 + b1 e1_z + b2 e2_z
     bary_img = torch.zeros(H * W, 3, dtype=dtype, device=device).index_put((pix,), bary)
     depth_img = torch.full((H * W,), float("inf"), dtype=dtype, device=device).index_put((pix,), depth)
     return bary_img.view(H, W, 3), depth_img.view(H, W)
