@@ -477,6 +477,12 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
 
+def _mat3(M, x):
+    """``x @ M.T`` for x (N, 3) and M (3, 3), as three multiply-adds in a fixed order: a matrix product
+    may sum in another order (or fuse) on another device, and the fragments must not depend on it."""
+    return x[:, :1] * M[:, 0] + x[:, 1:2] * M[:, 1] + x[:, 2:] * M[:, 2]
+
+
 def _visible_surface(face_map, verts, faces, camera, H, W):
     """Perspective-correct barycentrics and depth of the visible face at each covered pixel.
 
@@ -513,9 +519,9 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
         row_of_face = (torch.cumsum(seen, 0) - 1).index_select(0, face)
     v_world = verts.to(dtype)[faces if used is None else faces.index_select(0, used)]   # (U, 3, 3)
     # camera-space v0 in float64: R x + t cancels digits when the scene sits far from the origin
-    v0 = world_to_camera(v_world[:, 0].double(), R.double(), t.double()).to(dtype)   # (U, 3)
-    e1 = (v_world[:, 1] - v_world[:, 0]) @ R.T                              # (U, 3) edges, rotated only
-    e2 = (v_world[:, 2] - v_world[:, 0]) @ R.T
+    v0 = (_mat3(R.double(), v_world[:, 0].double()) + t.double()).to(dtype)   # (U, 3)
+    e1 = _mat3(R, v_world[:, 1] - v_world[:, 0])                            # (U, 3) edges, rotated only
+    e2 = _mat3(R, v_world[:, 2] - v_world[:, 0])
     if camera.orthographic:                                                 # d = +z: only z of each cross
         zero = torch.zeros_like(e1[:, 0])
         c = torch.stack([torch.stack([e2[:, 1], -e2[:, 0], torch.linalg.cross(e2, v0)[:, 2]], -1),
@@ -532,14 +538,14 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     py = (row + 0.5).to(dtype)
     # d = K⁻¹ p, written K⁻¹ (p - K e3) + e3 so that p - (cx, cy, 1) is formed first, exactly
     q = torch.stack([px - K[0, 2], py - K[1, 2], (1 - K[2, 2]).expand_as(px)], 1)   # (M, 3)
-    d = q @ torch.linalg.inv(K).T + torch.tensor([0, 0, 1], dtype=dtype, device=device)   # (M, 3) K⁻¹ p
-    w = (tab[:, :9].view(-1, 3, 3) * d[:, None, :]).sum(-1)                 # (M, 3): w1, w2, Σw
-    s = w[:, 2:]
+    d = _mat3(torch.linalg.inv(K), q) + torch.tensor([0, 0, 1], dtype=dtype, device=device)   # (M, 3)
+    c = tab[:, :9].view(-1, 3, 3)                                           # (M, 3, 3) rows for w1, w2, Σw
+    w = c[..., 0] * d[:, :1] + c[..., 1] * d[:, 1:2] + c[..., 2] * d[:, 2:]  # (M, 3)
     tiny = torch.finfo(dtype).tiny ** 0.5
-    s = torch.where(s.abs() < tiny, torch.full_like(s, tiny), s)            # edge-on faces: stay finite
-    b12 = w[:, :2] / s                                                      # (M, 2)
-    bary = torch.cat([1 - b12.sum(1, keepdim=True), b12], 1)                # (M, 3)
-    depth = tab[:, 9] + (b12 * tab[:, 10:12]).sum(1)                        # z0 + b1 e1_z + b2 e2_z
+    s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
+    b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
+    bary = torch.stack([1 - b1 - b2, b1, b2], 1)                            # (M, 3)
+    depth = tab[:, 9] + b1 * tab[:, 10] + b2 * tab[:, 11]                   # z0 + b1 e1_z + b2 e2_z
     bary_img = torch.zeros(H * W, 3, dtype=dtype, device=device).index_put((pix,), bary)
     depth_img = torch.full((H * W,), float("inf"), dtype=dtype, device=device).index_put((pix,), depth)
     return bary_img.view(H, W, 3), depth_img.view(H, W)

@@ -82,3 +82,18 @@ def test_float32_gradients_stay_finite_far_from_the_origin():
     fr = rasterize(Mesh(verts, mesh.faces), camera)
     (fr.depth[fr.mask].sum() + fr.bary.sum()).backward()
     assert fr.mask.any() and torch.isfinite(verts.grad).all() and verts.grad.abs().sum() > 0
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a GPU")
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("make", [_subpixel_sphere, _far_from_origin], ids=["subpixel", "far"])
+def test_cuda_fragments_are_bit_identical_to_the_cpu(make, dtype):
+    """Every step of the visible-surface stage rounds the same way on both devices (no matrix products,
+    whose summation order is the library's choice), so CPU and GPU fragments agree to the last bit."""
+    for orthographic in (False, True):
+        mesh, camera = make(orthographic)
+        mesh, camera = mesh.to(dtype=dtype), camera.to(dtype=dtype)
+        cpu = rasterize(mesh, camera)
+        gpu = rasterize(mesh.to(device="cuda"), camera.to(device="cuda"))
+        assert torch.equal(gpu.face_id.cpu(), cpu.face_id)
+        assert torch.equal(gpu.bary.cpu(), cpu.bary) and torch.equal(gpu.depth.cpu(), cpu.depth)
