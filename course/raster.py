@@ -478,9 +478,9 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
 
 def _mat3(M, x):
-    """``x @ M.T`` for x (N, 3) and M (3, 3), as three multiply-adds in a fixed order: a matrix product
+    """``x @ M.T`` for x (..., 3) and M (3, 3), as three multiply-adds in a fixed order: a matrix product
     may sum in another order (or fuse) on another device, and the fragments must not depend on it."""
-    return x[:, :1] * M[:, 0] + x[:, 1:2] * M[:, 1] + x[:, 2:] * M[:, 2]
+    return x[..., :1] * M[:, 0] + x[..., 1:2] * M[:, 1] + x[..., 2:] * M[:, 2]
 
 
 def _visible_surface(face_map, verts, faces, camera, H, W):
@@ -494,17 +494,18 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
 
     and the depth as the hit point's z, ``z0 + b1 e1_z + b2 e2_z``. For a pinhole camera ``o = 0`` and
     ``d = K⁻¹ p`` with the pixel centre ``p = (x, y, 1)``; for an orthographic one ``o = (K⁻¹ p)_xy`` and
-    ``d = +z``. Either way each numerator is linear in p, so every face turns into a 3×3 matrix once and
-    each pixel costs one small matrix-vector product.
+    ``d = +z``. Either way each numerator is linear in p, so every face turns into three affine functions of
+    the pixel's offset to the principal point, ``A (x - cx) + B (y - cy) + C``, and each pixel costs three.
 
     Why this form (float32 accuracy, ``tests/test_raster_precision.py``): every cross product involves at
     least one *edge*, never two vertex positions, so nothing cancels when a triangle is small and far away
     (``v1 × v2`` of two nearly parallel vectors of length D loses ``D / |e|`` of its digits); the edges are
     differences of world positions, rotated but not translated; ``v0 = R x0 + t`` is formed in float64,
-    because far from the origin ``R x0`` and ``t`` are large and nearly cancel; ``d`` is formed from the pixel's
+    because far from the origin ``R x0`` and ``t`` are large and nearly cancel; the pixel enters as its
     offset to the principal point; and the depth is ``z0`` plus a small correction, which stays accurate where
     the weights are not. float32 depth then lands within a few float32 epsilons of the float64 result,
-    wherever the scene sits. Plain torch: differentiable w.r.t. verts, K, R and t.
+    wherever the scene sits. Plain torch, differentiable w.r.t. verts, K, R and t, and no matrix products
+    (``_mat3``), so CPU and GPU give the same bits.
     """
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     device = verts.device
@@ -529,18 +530,18 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
                          torch.stack([zero, zero, torch.linalg.cross(e1, e2)[:, 2]], -1)], 1)
     else:                                                                   # T = -v0
         c = torch.stack([torch.linalg.cross(e2, v0), torch.linalg.cross(v0, e1), torch.linalg.cross(e1, e2)], 1)
+    # w_k = c_k · d with d = K⁻¹ p = K⁻¹ q + e3, q = p - K e3 = (x - cx, y - cy, 1 - K22): the offset to the
+    # principal point is formed exactly first, so no large terms cancel; per face, w_k = A x' + B y' + C
+    rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹
+    const = rows[..., 2] * (1 - K[2, 2]) + c[..., 2]                        # (U, 3)
     z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)                      # (U, 3) z0, e1_z, e2_z
-    table = torch.cat([c.reshape(-1, 9), z], 1)                             # (U, 12)
+    table = torch.cat([rows[..., 0], rows[..., 1], const, z], 1)            # (U, 12)
     tab = table.index_select(0, row_of_face)                                # (M, 12)
     pix_d = pix.double()
     row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
-    px = (pix_d - row * W + 0.5).to(dtype)                                  # (M,) pixel centres
-    py = (row + 0.5).to(dtype)
-    # d = K⁻¹ p, written K⁻¹ (p - K e3) + e3 so that p - (cx, cy, 1) is formed first, exactly
-    q = torch.stack([px - K[0, 2], py - K[1, 2], (1 - K[2, 2]).expand_as(px)], 1)   # (M, 3)
-    d = _mat3(torch.linalg.inv(K), q) + torch.tensor([0, 0, 1], dtype=dtype, device=device)   # (M, 3)
-    c = tab[:, :9].view(-1, 3, 3)                                           # (M, 3, 3) rows for w1, w2, Σw
-    w = c[..., 0] * d[:, :1] + c[..., 1] * d[:, 1:2] + c[..., 2] * d[:, 2:]  # (M, 3)
+    qx = (pix_d - row * W + 0.5).to(dtype)[:, None] - K[0, 2]               # (M, 1) pixel centre x - cx
+    qy = (row + 0.5).to(dtype)[:, None] - K[1, 2]                           # (M, 1) y - cy
+    w = tab[:, 0:3] * qx + tab[:, 3:6] * qy + tab[:, 6:9]                   # (M, 3): w1, w2, Σw
     tiny = torch.finfo(dtype).tiny ** 0.5
     s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
     b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
