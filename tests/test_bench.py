@@ -1,4 +1,5 @@
 """The benchmark runs and measures what it says; the OpenGL oracle agrees with the rasterizer."""
+import json
 import subprocess
 import sys
 
@@ -22,6 +23,19 @@ def test_bench_raster_reports_rows(capsys):
     assert all(r["ms"] > 0 and r["mtri_s"] > 0 for r in rows)
     assert "S4" in capsys.readouterr().out
     assert "OpenGL" not in format_table(rows)
+
+
+def test_bench_command_runs_a_benchmark_with_its_own_options(tmp_path, capsys):
+    from course.bench import BENCHES, cli
+    out = tmp_path / "rows.json"
+    assert cli(["raster", "--scenes", "S4", "--repeat", "1", "--no-memory", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    assert [(r["scene"], r["cull"]) for r in rows] == [("S4", False), ("S4", True)]
+    for name, module in BENCHES.items():                                   # every benchmark is complete
+        assert module.DESCRIPTION and callable(module.add_arguments) and callable(module.run), name
+    with pytest.raises(SystemExit):                                         # raster's options are its own
+        cli(["skips", "--scenes", "S4"])
+    assert "unrecognized arguments: --scenes" in capsys.readouterr().err
 
 
 def test_cli_usage_and_unknown_command():

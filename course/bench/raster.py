@@ -29,7 +29,9 @@ from ..models import icosphere
 from ..raster import rasterize
 from .timing import time_it, time_side_by_side
 
-__all__ = ["SCENES", "scene", "bench_raster", "format_table"]
+__all__ = ["SCENES", "scene", "bench_raster", "format_table", "add_arguments", "run"]
+
+DESCRIPTION = "rasterizer on the four standard scenes (S1-S4)"
 
 # name: (icosphere subdivisions, image size)
 SCENES = {"S1": (5, 512), "S2": (7, 512), "S3": (5, 1024), "S4": (3, 256)}
@@ -176,3 +178,16 @@ def format_table(rows) -> str:
             line += f"{r['gl_ms']:>11.2f}{r['ms'] / r['gl_ms']:>7.1f}{100 * r['agree']:>10.2f}%"
         lines.append(line)
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------- the command's options
+
+def add_arguments(parser) -> None:
+    """The options of ``python -m course bench raster``."""
+    parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    parser.add_argument("--vs", choices=["opengl"], help="also render with OpenGL and report the time ratio")
+    parser.add_argument("--no-memory", action="store_true", help="skip the peak-memory measurement")
+
+
+def run(args) -> list[dict]:
+    return bench_raster(args.scenes, args.repeat, vs_opengl=args.vs == "opengl", memory=not args.no_memory)

@@ -10,7 +10,9 @@ from ..camera import Camera
 from ..models import icosphere, teapot
 from .timing import time_side_by_side
 
-__all__ = ["bench_skips"]
+__all__ = ["bench_skips", "add_arguments", "run"]
+
+DESCRIPTION = "each pass render() skips: time with and without, and the image difference"
 
 
 def _skip_cases():
@@ -54,3 +56,11 @@ def bench_skips(repeat: int = 5, out=print) -> list[dict]:
               f"{r['max_diff']:>12.1e}" for r in rows]
     out("\n".join(lines))
     return rows
+
+
+def add_arguments(parser) -> None:
+    """``python -m course bench skips`` has no options of its own."""
+
+
+def run(args) -> list[dict]:
+    return bench_skips(args.repeat)
