@@ -15,7 +15,8 @@ Conventions (fixed; ``tests/test_conventions.py`` pins each one):
   counter-clockwise to the viewer. Rasterization follows the top-left fill rule.
 * Texture coordinates: u right, v up; texture images are stored row 0 at the top.
 * Colour is linear RGB in [0, 1]. Random functions take a ``torch.Generator`` or a seed.
-* Functions accept numpy arrays or tensors, return tensors, and keep the input's dtype and device.
+* Functions accept numpy arrays or tensors, return tensors, and keep the input's dtype and device; what is
+  made from nothing (the bundled models, ``load_mesh``) takes torch's default dtype (float32 unless changed).
 
 Shape letters used in every docstring: V vertices, F faces, H × W image, C channels, N points or rays,
 S samples.
