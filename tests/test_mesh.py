@@ -423,3 +423,21 @@ def test_ply_with_uvs_but_no_image_has_no_texture(tmp_path):
     path = tmp_path / "box.ply"
     t.export(path)
     assert load_mesh(path).texture is None
+
+
+def test_bundled_models_and_load_mesh_take_torchs_default_dtype(tmp_path):
+    """What is made from nothing follows torch.set_default_dtype (lectures print in float64); an explicit
+    dtype wins."""
+    trimesh = pytest.importorskip("trimesh")
+    path = tmp_path / "tri.obj"
+    trimesh.Trimesh(np.array(TRI_VERTS), [[0, 1, 2]], process=False).export(path)
+    assert cube().verts.dtype == torch.float32 and load_mesh(path).verts.dtype == torch.float32
+    before = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)
+    try:
+        pot = teapot(resolution=2)
+        assert pot.verts.dtype == pot.uvs.dtype == pot.texture.dtype == torch.float64
+        assert checker_texture(size=8).dtype == icosphere(1).verts.dtype == load_mesh(path).verts.dtype == torch.float64
+        assert torus(dtype=torch.float32).verts.dtype == torch.float32
+    finally:
+        torch.set_default_dtype(before)
