@@ -534,19 +534,21 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     # principal point is formed exactly first, so no large terms cancel; per face, w_k = A x' + B y' + C
     rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹
     const = rows[..., 2] * (1 - K[2, 2]) + c[..., 2]                        # (U, 3)
-    z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)                      # (U, 3) z0, e1_z, e2_z
-    table = torch.cat([rows[..., 0], rows[..., 1], const, z], 1)            # (U, 12)
-    tab = table.index_select(0, row_of_face)                                # (M, 12)
+    coef = torch.cat([rows[..., 0], rows[..., 1], const], 1).index_select(0, row_of_face)   # (M, 9)
     pix_d = pix.double()
     row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
     qx = (pix_d - row * W + 0.5).to(dtype)[:, None] - K[0, 2]               # (M, 1) pixel centre x - cx
     qy = (row + 0.5).to(dtype)[:, None] - K[1, 2]                           # (M, 1) y - cy
-    w = tab[:, 0:3] * qx + tab[:, 3:6] * qy + tab[:, 6:9]                   # (M, 3): w1, w2, Σw
+    w = coef[:, 0:3] * qx                                                   # (M, 3): w1, w2, Σw
+    w += coef[:, 3:6] * qy                                                  # in place: one (M, 3) buffer
+    w += coef[:, 6:9]
+    del coef, pix_d, row, qx, qy                                            # freed before the next buffers
     tiny = torch.finfo(dtype).tiny ** 0.5
     s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
     b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
     bary = torch.stack([1 - b1 - b2, b1, b2], 1)                            # (M, 3)
-    depth = tab[:, 9] + b1 * tab[:, 10] + b2 * tab[:, 11]                   # z0 + b1 e1_z + b2 e2_z
+    z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1).index_select(0, row_of_face)   # (M, 3) z0, e1_z, e2_z
+    depth = z[:, 0] + b1 * z[:, 1] + b2 * z[:, 2]                           # z0 + b1 e1_z + b2 e2_z
     bary_img = torch.zeros(H * W, 3, dtype=dtype, device=device).index_put((pix,), bary)
     depth_img = torch.full((H * W,), float("inf"), dtype=dtype, device=device).index_put((pix,), depth)
     return bary_img.view(H, W, 3), depth_img.view(H, W)
