@@ -70,3 +70,12 @@ def test_bench_skips_are_exact(capsys):
     rows = bench_skips(repeat=1)
     assert len(rows) == 4
     assert all(r["max_diff"] == 0.0 for r in rows), rows                    # every skip leaves the image as is
+
+
+def test_bench_precision_reports_float32_against_float64(capsys):
+    from course.bench.precision import bench_precision
+    rows = bench_precision(["teapot", "moved-1e5"], repeat=1)
+    assert [r["scene"] for r in rows] == ["teapot", "moved-1e5"]
+    assert all(r["ms32"] > 0 and r["ms64"] > 0 and r["same"] > 0.99 for r in rows)
+    assert all(0 < r["depth_p50"] <= r["depth_p99"] <= r["depth_max"] < 1e-4 for r in rows)
+    assert "moved-1e5" in capsys.readouterr().out

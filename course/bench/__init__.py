@@ -6,6 +6,8 @@
   back-face culling, optionally side by side with OpenGL.
 * ``skips`` (``course.bench.skips``): each pass ``render()`` skips, timed with and without the skip, and the
   largest pixel difference between the two images.
+* ``precision`` (``course.bench.precision``): float32 against float64 on scenes where float32 is hard (sub-pixel
+  triangles, far from the origin): time, and depth and barycentric error.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options) and ``run(args)``,
 and one line in ``BENCHES`` below makes it a sub-command; ``--repeat`` and ``--json`` are common to all.
@@ -20,7 +22,7 @@ import json
 
 import torch
 
-from . import raster, skips
+from . import precision, raster, skips
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -28,7 +30,7 @@ from .timing import time_it, time_side_by_side
 __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "bench_skips", "cli"]
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
-BENCHES = {"raster": raster, "skips": skips}
+BENCHES = {"raster": raster, "skips": skips, "precision": precision}
 
 
 def cli(argv) -> int:
