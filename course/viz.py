@@ -9,8 +9,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-__all__ = ["to_numpy", "show_image", "image_grid", "signed_image", "plot_points_3d", "plot_mesh_3d",
+__all__ = ["to_numpy", "show_image", "image_grid", "signed_image", "show_depth", "plot_points_3d", "plot_mesh_3d",
            "plot_triangles_2d", "pixel_grid", "explorer", "image_stats"]
+
+DEPTH_CMAP = "viridis_r"     # one depth colour map in every lecture: near is yellow, far is dark blue
 
 
 def to_numpy(x) -> np.ndarray:
@@ -58,6 +60,20 @@ def image_grid(images, titles=None, cols: int | None = None, size: float = 3.0, 
             ax.axis("off")
     fig.tight_layout()
     return fig
+
+
+def show_depth(depth, title: str | None = None, ax=None, colorbar: bool = True, **imshow_kw):
+    """A depth image (H, W), camera-space z, in the course's one depth colour map with a labelled colour bar.
+
+    Pixels where nothing is hit (+inf, as ``Fragments.depth`` stores them, or NaN) are left white.
+    Returns the axes.
+    """
+    a = to_numpy(depth).astype(np.float64)
+    a = np.where(np.isfinite(a), a, np.nan)
+    ax = show_image(a, title, ax=ax, cmap=imshow_kw.pop("cmap", DEPTH_CMAP), **imshow_kw)
+    if colorbar:
+        plt.colorbar(ax.images[-1], ax=ax, fraction=0.046, pad=0.04, label="depth (camera z)")
+    return ax
 
 
 def signed_image(values, title: str | None = None, ax=None):
