@@ -14,7 +14,8 @@ Conventions (fixed; ``tests/test_conventions.py`` pins each one):
 * ``faces`` (F, 3) int64 index ``verts`` (V, 3); a face is front-facing when its vertices appear
   counter-clockwise to the viewer. Rasterization follows the top-left fill rule.
 * Texture coordinates: u right, v up; texture images are stored row 0 at the top.
-* Colour is linear RGB in [0, 1]. Random functions take a ``torch.Generator`` or a seed.
+* Colour is linear RGB in [0, 1] and shading is linear; sRGB encoding happens only for display and PNG
+  output, and 8-bit image textures are decoded from sRGB on load. Random functions take a ``torch.Generator`` or a seed.
 * Functions accept numpy arrays or tensors, return tensors, and keep the input's dtype and device; what is
   made from nothing (the bundled models, ``load_mesh``) takes torch's default dtype (float32 unless changed).
 
@@ -30,8 +31,8 @@ from .mesh import Mesh, join_meshes, load_mesh
 from .models import checker_texture, cube, default_scene_mesh, icosphere, plane, teapot, torus
 from .raster import Fragments, interpolate, rasterize, rasterize_naive
 from .render import RenderResult, RenderSettings, Scene
-from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, phong,
-                      sample_texture)
+from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, linear_to_srgb,
+                      phong, sample_texture, srgb_to_linear)
 
 __version__ = "0.1.0"
 
@@ -46,5 +47,5 @@ __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
-    "sample_texture", "Scene", "RenderSettings", "RenderResult",
+    "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",
 ]

@@ -190,14 +190,22 @@ def _texture_atlas(meshes):
 
 
 # ---- loading ---------------------------------------------------------------------------------
-def load_mesh(path, *, dtype=None, device=None) -> Mesh:
+def load_mesh(path, *, dtype=None, device=None, srgb_textures: bool = True) -> Mesh:
     """Read a triangle mesh from any file trimesh reads (OBJ, PLY, STL, GLB / glTF, OFF, ...).
 
     A file holding several objects (a scene) becomes one mesh (trimesh packs their textures into one
     atlas). Kept from the file: per-vertex uvs and the texture image (OBJ + MTL, glTF), and per-vertex
     colours (PLY, glTF); polygons are triangulated; STL corners are merged into shared vertices.
-    Normals are not read: `Mesh.vertex_normals` computes them from the geometry. Texture values are
-    used as stored (no sRGB decoding). ``dtype`` defaults to torch's default dtype (float32 unless changed).
+    Normals are not read: `Mesh.vertex_normals` computes them from the geometry. ``dtype`` defaults to
+    torch's default dtype (float32 unless changed).
+
+    Shading works on linear RGB, but 8-bit image textures are stored sRGB-encoded by convention (glTF
+    requires it for base colour; painted and photographed OBJ textures are sRGB too). So with
+    ``srgb_textures=True`` (default) the texture is decoded to linear with
+    :func:`course.shading.srgb_to_linear`; ``srgb_textures=False`` keeps the stored values (a texture that
+    holds linear data, such as one written from a linear image without encoding). Vertex colours are
+    kept as stored. The bundled models' textures (``models.checker_texture``) are generated linear and
+    never pass through here.
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
@@ -221,14 +229,15 @@ def load_mesh(path, *, dtype=None, device=None) -> Mesh:
     if len(loaded.vertices) == 0 or len(loaded.faces) == 0:
         raise ValueError(f"mesh file {path} holds no triangles ({len(loaded.vertices)} vertices, "
                          f"{len(loaded.faces)} faces)")
-    attributes = _trimesh_visuals(loaded)
+    attributes = _trimesh_visuals(loaded, srgb_textures)
     verts = torch.as_tensor(np.asarray(loaded.vertices), dtype=dtype or torch.get_default_dtype(), device=device)
     faces = torch.as_tensor(np.asarray(loaded.faces, dtype=np.int64), device=device)
     return Mesh(verts, faces, **attributes)
 
 
-def _trimesh_visuals(loaded) -> dict:
-    """Mesh keyword arguments (uvs, texture or vert_colors) from a trimesh mesh's visual."""
+def _trimesh_visuals(loaded, srgb_textures: bool = True) -> dict:
+    """Mesh keyword arguments (uvs, texture or vert_colors) from a trimesh mesh's visual; the texture is
+    decoded from sRGB to linear (float64 in [0, 1]) when ``srgb_textures``, else left as stored (uint8)."""
     visual = loaded.visual
     if visual.kind == "vertex":
         return {"vert_colors": np.asarray(visual.vertex_colors)[:, :3]}  # uint8 RGBA -> RGB
@@ -242,6 +251,9 @@ def _trimesh_visuals(loaded) -> dict:
     if image is None or min(image.size) <= 2:                  # trimesh's 2x2 placeholder: no real image
         return {}
     texture = np.asarray(image.convert("RGB"))                  # (Ht, Wt, 3) uint8
+    if srgb_textures:
+        from course.shading import srgb_to_linear
+        texture = srgb_to_linear(torch.from_numpy(texture.astype(np.float64) / 255)).numpy()  # (Ht, Wt, 3) linear
     return {"uvs": np.asarray(uv, dtype=np.float64), "texture": texture}
 
 

@@ -386,7 +386,7 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m course render",
                                 description="Render a mesh (default: the bundled textured teapot) to a PNG.")
     p.add_argument("mesh", nargs="?", help="mesh file (any format trimesh reads); omit for the default scene")
-    p.add_argument("--out", required=True, help="output PNG path")
+    p.add_argument("--out", required=True, help="output PNG path (8-bit, sRGB-encoded from the linear render)")
     p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="image size in pixels")
     p.add_argument("--width", type=int, help="image width in pixels (default 512)")
     p.add_argument("--height", type=int, help="image height in pixels (default: the width)")
@@ -408,9 +408,15 @@ def _image_size(args) -> tuple[int, int]:
     return width, height
 
 
-def _save_png(image: torch.Tensor, path: str) -> None:
+def _save_png(image: torch.Tensor, path: str, srgb: bool = True) -> None:
+    """Write a linear RGB image (H, W, 3) as an 8-bit PNG: clamped to [0, 1], sRGB-encoded (IEC 61966-2-1,
+    what PNG viewers assume) unless ``srgb=False``, then rounded to 0..255."""
     from PIL import Image
-    pixels = (image.detach().clamp(0, 1).cpu().numpy() * 255 + 0.5).astype("uint8")
+    from course.shading import linear_to_srgb
+    image = image.detach().clamp(0, 1)
+    if srgb:
+        image = linear_to_srgb(image)
+    pixels = (image.cpu().numpy() * 255 + 0.5).astype("uint8")
     Image.fromarray(pixels, mode="RGB").save(path, format="PNG")
 
 

@@ -20,6 +20,11 @@ The shading model (lecture 04), for a point with base colour ``c`` and material 
 
 where ``L_j`` is light j's colour × intensity (÷ d² for a point light) and ``s_j`` the Blinn-Phong
 (or Phong) highlight. Colours are linear RGB; nothing is clamped here.
+
+**Linear and sRGB.** All shading happens on *linear* RGB, proportional to light power, because only there
+do adding lights and averaging samples mean what they mean physically. Images are encoded to sRGB
+(IEC 61966-2-1) only on their way to a screen or a PNG, and 8-bit image textures, stored sRGB-encoded by
+convention, are decoded on load: :func:`linear_to_srgb` and :func:`srgb_to_linear`.
 """
 from __future__ import annotations
 
@@ -34,7 +39,7 @@ __all__ = [
     "AmbientLight", "DirectionalLight", "PointLight", "Material",
     "normalize", "lambert", "blinn_phong", "phong", "sample_texture", "light_terms", "shade",
     "view_directions", "flat_shading", "gouraud_shading", "phong_shading", "edge_distance",
-    "wireframe_overlay",
+    "wireframe_overlay", "linear_to_srgb", "srgb_to_linear",
 ]
 
 EPS = 1e-12            # lengths below sqrt(EPS) count as zero in normalize()
@@ -398,3 +403,59 @@ def wireframe_overlay(image, mesh, fragments, camera, width: float = 1.0, color=
     coverage = (width / 2 + 0.5 - d).clamp(0, 1)[..., None].to(image.dtype)  # (H, W, 1); 0 where empty
     line = as_tensor(color, dtype=image.dtype, device=image.device, name="wireframe color")
     return image * (1 - coverage) + line * coverage
+
+
+# ------------------------------------------------------------------------------------------------- sRGB
+
+SRGB_LINEAR_MAX = 0.0031308     # linear values up to here use the straight segment of the sRGB curve
+SRGB_ENCODED_MAX = 0.04045      # ... which ends at this encoded value (12.92 × 0.0031308)
+
+
+def linear_to_srgb(linear) -> torch.Tensor:
+    """Encode linear RGB for display (IEC 61966-2-1): ``12.92 x`` for x <= 0.0031308, else
+    ``1.055 x^(1/2.4) - 0.055``.
+
+    linear: (...) any shape (colour channels only: do not pass alpha), dtype and device kept. Values are
+    not clamped: below 0 the straight segment continues, above 1 the power curve. Differentiable
+    everywhere; the power branch only ever sees x >= 0.0031308, so its gradient stays finite (a "safe where").
+    """
+    x = as_tensor(linear, name="linear colour")
+    curve = x > SRGB_LINEAR_MAX
+    safe = torch.where(curve, x, torch.ones_like(x))                        # keeps x^(1/2.4)'s gradient finite
+    return torch.where(curve, 1.055 * safe ** (1 / 2.4) - 0.055, 12.92 * x)
+
+
+def srgb_to_linear(encoded) -> torch.Tensor:
+    """Decode sRGB values (in [0, 1], e.g. 8-bit texels / 255) to linear RGB (IEC 61966-2-1): ``c / 12.92``
+    for c <= 0.04045, else ``((c + 0.055) / 1.055)^2.4``. The exact inverse of :func:`linear_to_srgb`.
+
+    encoded: (...) any shape, float dtype and device kept. The range is not guessed: divide 8-bit values by
+    255 first (integers are only converted to torch's default dtype). Differentiable everywhere.
+    """
+    c = as_tensor(encoded, name="sRGB colour")
+    curve = c > SRGB_ENCODED_MAX
+    safe = torch.where(curve, c, torch.ones_like(c))
+    return torch.where(curve, ((safe + 0.055) / 1.055) ** 2.4, c / 12.92)
+
+
+# ---- reference for task 4.4
+def mip_level(duv_dx, duv_dy, texture_size) -> torch.Tensor:
+    """The mip level λ (level of detail) a pixel samples a texture at, from its screen-space uv derivatives.
+
+    duv_dx, duv_dy: (N, 2) the change of (u, v) per pixel step in x and in y (uv with v up, as in
+    ``sample_texture``); texture_size: (Ht, Wt), level 0's size in texels. Returns (N,) float in duv_dx's
+    dtype: λ = max(0, log2 ρ) with ρ = max(|(Wt ∂u/∂x, Ht ∂v/∂x)|, |(Wt ∂u/∂y, Ht ∂v/∂y)|), the length in
+    texels of the longer side of the pixel's footprint (the OpenGL specification's scale factor, no bias).
+    Level λ halves the texture λ times, so one of its texels covers about one pixel. λ = 0 where ρ <= 1
+    (magnification: the full-size texture), and where the derivatives are zero.
+    """
+    dx = as_tensor(duv_dx, name="duv_dx")
+    dy = as_tensor(duv_dy, dtype=dx.dtype, device=dx.device, name="duv_dy")
+    height, width = (float(s) for s in texture_size)
+    texels = torch.tensor([width, height], dtype=dx.dtype, device=dx.device)   # u counts columns, v rows
+    rho = torch.maximum(torch.linalg.vector_norm(dx * texels, dim=-1),
+                        torch.linalg.vector_norm(dy * texels, dim=-1))         # (N,) footprint in texels
+    return torch.log2(rho.clamp_min(1.0))
+
+
+__all__ += ["mip_level"]
