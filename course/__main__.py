@@ -1,4 +1,4 @@
-"""Command line: ``python -m course render | bench | grade | release``.
+"""Command line: ``python -m course render | bench | grade | release | workspace``.
 
 Each sub-command lives beside the topic it belongs to and exposes ``cli(argv) -> int``.
 """
@@ -10,12 +10,13 @@ COMMANDS = {
     "bench": ("course.bench", "time against error, side by side"),
     "grade": ("course.grading.grader", "grade exercise notebooks in fresh kernels"),
     "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),
+    "workspace": ("course.grading.workspace", "copy an exercise into work/, your own folder (never overwritten)"),
 }
 
 
 def usage() -> str:
     lines = ["usage: python -m course COMMAND [options]", "", "commands:"]
-    lines += [f"  {name:<8} {help_}" for name, (_, help_) in COMMANDS.items()]
+    lines += [f"  {name:<10} {help_}" for name, (_, help_) in COMMANDS.items()]
     lines += ["", "Run `python -m course COMMAND --help` for a command's options."]
     return "\n".join(lines)
 
