@@ -1,7 +1,19 @@
 """The command-line grader: every notebook run in a fresh kernel, every task scored by the grader itself.
 
-``python -m course grade NOTEBOOK... [--json FILE] [--csv FILE] [--timeout SECONDS]`` runs each notebook
-in a fresh ``python3`` kernel, keeps going past cells that raise or hang, then scores every task itself.
+``python -m course grade NOTEBOOK... [--jobs N] [--json FILE] [--csv FILE] [--gradebook FILE] [--timeout
+SECONDS]`` runs each notebook in a fresh ``python3`` kernel, keeps going past cells that raise or hang, then
+scores every task itself.
+
+Grading a class
+---------------
+The student comes from the path: the folder above the notebook (``class/<student>/03_rasterization.ipynb``),
+or ``<student>`` in nbgrader's ``.../submitted/<student>/<assignment>/03_rasterization.ipynb``
+(``student_of``). Two notebooks of one student and lecture are an error naming both; when the notebooks are
+not in per-student folders (two attempts at one lecture side by side in one folder), each notebook stands
+alone, named by its path, as before (``assign_students``). ``--jobs N`` grades N notebooks at once, each in
+its own kernel with its own time limits, from threads (``grade_notebooks``); the results come out in the
+order given, the same as one at a time. The command prints a table, each lost point's reason, and a summary
+per task (the mean points and how many scored 0, 1, ..., max), so the class's hard task shows.
 
 How far the grader can be trusted
 ---------------------------------
@@ -16,12 +28,14 @@ score lines, deleting or editing check cells, and monkeypatching ``course.gradin
 ``run_check``, ``TASKS``), its modules (``course.grading.helpers``, ``course.grading.lecture03``,
 ``course.grading.grader``, ...) or the references in ``course.camera``, ``course.raster``, ``course.shading``
 gain nothing. Results returned as tensor subclasses are turned into plain tensors before they are compared.
+A graded function that can reach the package function it re-implements scores 0 with a message naming it
+(``registry.calls_reference`` reads its code before the check runs); a call hidden on purpose (``getattr``
+with a built string, ``exec``) is not caught, but reading the code shows it.
 
 What it does not protect against: the student's functions run in the grader's process, unsandboxed. Code
 written to attack the grader (patching torch, numpy or builtins, installing import hooks or IPython
 event callbacks, inspecting or patching the grader's frames while a check runs, tampering with stdout)
-is outside this protection, as is a function that simply calls the package's reference implementation.
-Sabotage of the grader's own cell ends in 0 points, not more. The grader is not a sandbox: do not run
+is outside this protection. Sabotage of the grader's own cell ends in 0 points, not more. The grader is not a sandbox: do not run
 notebooks you do not trust with your own privileges, and read code whose score surprises you.
 """
 from __future__ import annotations
@@ -35,13 +49,16 @@ import re
 import secrets
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
 
 from .helpers import summarize_exception
 from .registry import DEFAULT_TIMEOUT, TASKS, Result, Task, _task_key, run_check, tasks_for_lecture
 from .release import CHECK_CALL
 
-__all__ = ["grade_notebook", "cli"]
+__all__ = ["grade_notebook", "grade_notebooks", "student_of", "assign_students", "Submission",
+           "DuplicateSubmission", "cli"]
 
 
 # ----------------------------------------------------------------------------- grading whole notebooks
@@ -170,69 +187,230 @@ def _execute_with_grader(nb, path: Path, task_ids: list[str], timeout: float):
     return json.loads(line), ""
 
 
+# ------------------------------------------------------------------------------- a class of notebooks
+
+STUDENT_MODES = ("auto", "folder", "notebook")
+
+
+@dataclass(frozen=True)
+class Submission:
+    """One notebook to grade: ``path`` as given, ``student`` who handed it in (``student_of``, or the path
+    itself when every notebook stands alone), ``lecture`` the NN of its ``NN_`` name (None: no tasks, not run)."""
+    path: Path
+    student: str
+    lecture: int | None
+
+
+class DuplicateSubmission(ValueError):
+    """Two notebooks of one student and lecture: which of them counts is the teaching assistant's call."""
+
+
+def student_of(path) -> str:
+    """Who handed in ``path``: ``<student>`` in nbgrader's ``.../submitted/<student>/<assignment>/NN_x.ipynb``,
+    otherwise the folder above the notebook (``class/<student>/03_rasterization.ipynb``)."""
+    parts = Path(os.path.abspath(path)).parts
+    if len(parts) >= 4 and parts[-4] == "submitted":
+        return parts[-3]
+    return parts[-2] if len(parts) >= 2 else str(path)
+
+
+def assign_students(paths, mode: str = "auto") -> tuple[list[Submission], bool, str]:
+    """Who handed in each notebook: (submissions in the order given, read per student?, a note or "").
+
+    ``mode`` "folder": the student comes from the path (``student_of``), and two notebooks of one student and
+    lecture raise ``DuplicateSubmission`` naming both. "notebook": every notebook stands alone, named by its
+    path (the table of old). "auto": "folder" unless two notebooks share a student and lecture; then
+    "notebook", with a note that says which two (``submissions/01_wrong.ipynb`` and
+    ``submissions/01_cheater.ipynb`` are two attempts in one folder, not one student's). A path given twice
+    is graded once.
+    """
+    if mode not in STUDENT_MODES:
+        raise ValueError(f"mode must be one of {', '.join(STUDENT_MODES)}, got {mode!r}")
+    paths = list(dict.fromkeys(Path(p) for p in paths))
+    alone = [Submission(p, str(p), _lecture_number(p)) for p in paths]
+    if mode == "notebook":
+        return alone, False, ""
+    submissions = [Submission(p, student_of(p), _lecture_number(p)) for p in paths]
+    first: dict[tuple[str, int], Submission] = {}
+    for s in submissions:
+        if s.lecture is None:                                           # no tasks: nothing to count twice
+            continue
+        other = first.setdefault((s.student, s.lecture), s)
+        if other is not s:
+            clash = (f"{other.path} and {s.path} are both lecture {s.lecture:02d} of student {s.student!r}")
+            if mode == "folder":
+                raise DuplicateSubmission(f"{clash}: grade one of them (move or rename the other)")
+            return alone, False, (f"{clash}, so folders are not read as students: each notebook is graded on "
+                                  "its own (--students folder makes this an error)")
+    return submissions, True, ""
+
+
+def grade_notebooks(paths, timeout: float = 60.0, jobs: int = 1, progress: bool = True) -> list[list[Result]]:
+    """``grade_notebook`` for each of ``paths``, ``jobs`` at a time; the results in the order of ``paths``.
+
+    Every notebook still runs in its own fresh kernel with its own time limits, so the results are the same
+    for any ``jobs``. With ``jobs`` > 1 threads drive the kernels (the work runs in the kernels' processes):
+    grading one notebook shares no state with another, as each call has its own notebook object, nonce,
+    grader cell, client, kernel and (nbclient's, per thread) event loop. Each kernel takes its own memory
+    (about 270 MB for lecture 03). A progress bar (tqdm) counts finished notebooks on stderr; TQDM_DISABLE=1
+    or ``progress=False`` hides it.
+    """
+    from tqdm.auto import tqdm
+
+    paths = [Path(p) for p in paths]
+    if int(jobs) != jobs or jobs < 1:
+        raise ValueError(f"jobs is how many notebooks to grade at once, at least 1; got {jobs!r}")
+    results: list[list[Result] | None] = [None] * len(paths)
+    bar_options = {} if progress else {"disable": True}          # unset, tqdm reads TQDM_DISABLE
+    with tqdm(total=len(paths), desc="grading", unit="notebook", file=sys.stderr, **bar_options) as bar:
+        if jobs == 1 or len(paths) < 2:
+            for k, path in enumerate(paths):
+                results[k] = grade_notebook(path, timeout=timeout)
+                bar.update()
+            return results
+        pool = ThreadPoolExecutor(max_workers=min(int(jobs), len(paths)), thread_name_prefix="grade")
+        try:
+            futures = {pool.submit(grade_notebook, path, timeout): k for k, path in enumerate(paths)}
+            for future in as_completed(futures):                          # completion order ...
+                results[futures[future]] = future.result()                # ... stored in the given order
+                bar.update()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)                 # Ctrl-C: no new kernels start
+    return results
+
+
 # ------------------------------------------------------------------------------------- command line
+
+Graded = list[tuple[Submission, list[Result]]]                 # each notebook with its results, as given
+
 
 def _points(results: list[Result]) -> tuple[int, int]:
     return sum(r.points for r in results), sum(r.max_points for r in results)
 
 
-def _table(graded: dict[str, list[Result]], task_ids: list[str]) -> str:
-    """Rows: notebooks; columns: task ids and the total."""
-    rows = [["notebook"] + task_ids + ["total"]]
-    for name, results in graded.items():
-        by_id = {r.task: f"{r.points}/{r.max_points}" for r in results}
-        rows.append([name] + [by_id.get(i, "-") for i in task_ids] + ["{}/{}".format(*_points(results))])
+def _align(rows: list[list[str]], left: int) -> str:
+    """Rows of cells as columns: the first ``left`` columns flush left, the others flush right."""
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
-    return "\n".join("  ".join(cell.ljust(w) if k == 0 else cell.rjust(w) for k, (cell, w) in
+    return "\n".join("  ".join(cell.ljust(w) if k < left else cell.rjust(w) for k, (cell, w) in
                                enumerate(zip(row, widths))).rstrip() for row in rows)
 
 
-def _write_json(path: Path, graded: dict[str, list[Result]]) -> None:
-    data = {name: [{"task": r.task, "points": r.points, "max_points": r.max_points, "message": r.message}
-                   for r in results] for name, results in graded.items()}
+def _table(graded: Graded, task_ids: list[str], by_student: bool) -> str:
+    """Rows: notebooks (student and notebook name, or the path); columns: task ids and the total."""
+    names = ["student", "notebook"] if by_student else ["notebook"]
+    rows = [names + task_ids + ["total"]]
+    for s, results in graded:
+        by_id = {r.task: f"{r.points}/{r.max_points}" for r in results}
+        first = [s.student, s.path.name] if by_student else [str(s.path)]
+        rows.append(first + [by_id.get(i, "-") for i in task_ids] + ["{}/{}".format(*_points(results))])
+    return _align(rows, left=len(names))
+
+
+def _summary(graded: Graded, task_ids: list[str], by_student: bool) -> str:
+    """Per task: how many were graded on it, the mean points, and how many scored 0, 1, ..., max points."""
+    per_task = {i: [r for _, results in graded for r in results if r.task == i] for i in task_ids}
+    top = max(results[0].max_points for results in per_task.values())
+    rows = [["task", "function", "graded", "mean"] + [str(k) for k in range(top + 1)]]
+    for task_id, results in per_task.items():
+        points, most = [r.points for r in results], results[0].max_points
+        rows.append([task_id, results[0].name, str(len(points)), f"{sum(points) / len(points):.2f}/{most}"]
+                    + [str(points.count(k)) if k <= most else "" for k in range(top + 1)])
+    who = "students" if by_student else "notebooks"
+    return (f"Summary: per task, the mean points and how many {who} scored 0, 1, 2, ... points\n"
+            + _align(rows, left=2))
+
+
+def _write_json(path: Path, graded: Graded, by_student: bool) -> None:
+    student = (lambda s: {"student": s.student}) if by_student else (lambda s: {})
+    data = {str(s.path): [{**student(s), "task": r.task, "points": r.points, "max_points": r.max_points,
+                           "message": r.message} for r in results] for s, results in graded}
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
-def _write_csv(path: Path, graded: dict[str, list[Result]], task_ids: list[str]) -> None:
+def _write_csv(path: Path, graded: Graded, task_ids: list[str], by_student: bool) -> None:
     with open(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
-        writer.writerow(["notebook"] + task_ids + ["total"])
-        for name, results in graded.items():
+        writer.writerow((["student"] if by_student else []) + ["notebook"] + task_ids + ["total"])
+        for s, results in graded:
             by_id = {r.task: r.points for r in results}
-            writer.writerow([name] + [by_id.get(i, "") for i in task_ids] + [_points(results)[0]])
+            writer.writerow(([s.student] if by_student else []) + [str(s.path)]
+                            + [by_id.get(i, "") for i in task_ids] + [_points(results)[0]])
+
+
+def _write_gradebook(path: Path, graded: Graded, task_ids: list[str]) -> None:
+    """One row per student (sorted), one column per task of every lecture graded (empty: no notebook of that
+    lecture), and the total."""
+    points: dict[str, dict[str, int]] = {}
+    for s, results in graded:
+        points.setdefault(s.student, {}).update({r.task: r.points for r in results})
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(["student"] + task_ids + ["total"])
+        for student in sorted(points):
+            row = points[student]
+            writer.writerow([student] + [row.get(i, "") for i in task_ids] + [sum(row.values())])
 
 
 def cli(argv: list[str] | None = None) -> int:
-    """``python -m course grade NOTEBOOK... [--json FILE] [--csv FILE] [--timeout SECONDS]``."""
+    """``python -m course grade NOTEBOOK... [--jobs N] [--students MODE] [--json FILE] [--csv FILE]
+    [--gradebook FILE] [--timeout SECONDS]``."""
     parser = argparse.ArgumentParser(
         prog="python -m course grade",
-        description="Run each notebook in a fresh kernel and score its tasks (tasks come from the NN_ prefix).")
+        description="Run each notebook in a fresh kernel and score its tasks (tasks come from the NN_ prefix). "
+                    "The student is the folder above the notebook (class/<student>/03_rasterization.ipynb), "
+                    "or <student> in nbgrader's submitted/<student>/<assignment>/.")
     parser.add_argument("notebooks", nargs="+", type=Path, metavar="NOTEBOOK")
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write {notebook: [{task, points, ...}]}")
-    parser.add_argument("--csv", type=Path, metavar="FILE", help="one row per notebook, one column per task")
+    parser.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
+                        help="grade N notebooks at once, each in its own kernel (default: 1); same results, "
+                             "N times the memory")
+    parser.add_argument("--students", choices=STUDENT_MODES, default="auto",
+                        help="folder: the student comes from the path, two notebooks of one student and lecture "
+                             "are an error; notebook: each notebook on its own; auto (default): folder, unless "
+                             "two notebooks share a student and lecture")
+    parser.add_argument("--json", type=Path, metavar="FILE",
+                        help="write {notebook: [{student, task, points, max_points, message}]}")
+    parser.add_argument("--csv", type=Path, metavar="FILE",
+                        help="one row per notebook (student, notebook, one column per task, total)")
+    parser.add_argument("--gradebook", type=Path, metavar="FILE",
+                        help="one row per student across every lecture graded, one column per task, and the "
+                             "total (reads the students from the folders, as --students folder)")
     parser.add_argument("--timeout", type=float, default=60.0, metavar="SECONDS",
                         help=f"time limit for each cell (default: 60); each task check gets at most "
                              f"{DEFAULT_TIMEOUT:g} s")
     args = parser.parse_args(argv)
+    if args.jobs < 1:
+        print(f"error: --jobs is how many notebooks to grade at once, at least 1; got {args.jobs}", file=sys.stderr)
+        return 2
     missing = [str(p) for p in args.notebooks if not p.is_file()]
     if missing:
         print(f"error: no such notebook: {', '.join(missing)}", file=sys.stderr)
         return 2
-    graded: dict[str, list[Result]] = {}
-    for path in args.notebooks:
-        if _lecture_number(path) is None or not tasks_for_lecture(_lecture_number(path)):
-            print(f"warning: {path}: no graded tasks for this notebook (its name must start with a lecture "
+    mode = "folder" if args.gradebook and args.students == "auto" else args.students
+    try:
+        submissions, by_student, note = assign_students(args.notebooks, mode)
+    except DuplicateSubmission as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if note:
+        print(f"note: {note}", file=sys.stderr)
+    for s in submissions:
+        if s.lecture is None or not tasks_for_lecture(s.lecture):
+            print(f"warning: {s.path}: no graded tasks for this notebook (its name must start with a lecture "
                   "number that has tasks, e.g. 01_)", file=sys.stderr)
-        print(f"grading {path} ...", file=sys.stderr, flush=True)
-        graded[str(path)] = grade_notebook(path, timeout=args.timeout)
-    task_ids = sorted({r.task for results in graded.values() for r in results}, key=_task_key)
-    print(_table(graded, task_ids))
-    for name, results in graded.items():
-        for r in results:
+    results = grade_notebooks([s.path for s in submissions], timeout=args.timeout, jobs=args.jobs)
+    graded = list(zip(submissions, results))
+    task_ids = sorted({r.task for _, rs in graded for r in rs}, key=_task_key)
+    print(_table(graded, task_ids, by_student))
+    for s, rs in graded:
+        for r in rs:
             if r.points < r.max_points and r.message:
-                print(f"  {name} {r.task} {r.name}: {r.message}")
+                print(f"  {s.path} {r.task} {r.name}: {r.message}")
+    if task_ids:
+        print("\n" + _summary(graded, task_ids, by_student))
     if args.json:
-        _write_json(args.json, graded)
+        _write_json(args.json, graded, by_student)
     if args.csv:
-        _write_csv(args.csv, graded, task_ids)
+        _write_csv(args.csv, graded, task_ids, by_student)
+    if args.gradebook:
+        _write_gradebook(args.gradebook, graded, task_ids)
     return 0
