@@ -34,7 +34,7 @@ from .tensors import as_tensor
 
 __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate", "edge_function", "inside_triangle",
-    "barycentric_2d", "perspective_correct_bary", "zbuffer_resolve",
+    "barycentric_2d", "perspective_correct_bary", "zbuffer_resolve", "clip_polygon_near",
 ]
 
 # Work per chunk: (row segments, fragments). Bounds memory and keeps the working arrays small enough to stay
@@ -196,6 +196,33 @@ def zbuffer_resolve(pixel_index, depth, face_id, num_pixels: int):
     depth_map = torch.full((num_pixels,), float("inf"), dtype=depth.dtype, device=depth.device)
     depth_map[pixel_index[ok][winner]] = depth[ok][winner]
     return face_map, depth_map
+
+
+def clip_polygon_near(tri_cam, near: float) -> torch.Tensor:
+    """The part of one camera-space triangle in front of the near plane, as a polygon (Sutherland–Hodgman
+    against the single plane z = near; ``rasterize`` clips every face this way before it projects).
+
+    tri_cam: (3, 3) camera-space vertices (OpenCV axes: +z forward, depth positive in front); near: > 0.
+    Returns (P, 3) in tri_cam's dtype, the polygon's vertices in the triangle's cyclic order (so its winding
+    is kept): P = 0 when every vertex is behind (z < near), 3 when all are in front (the triangle itself) or
+    one is (a smaller triangle), 4 when two are (a quad, split in two by ``rasterize``). Walk each edge
+    a → b: keep a when z_a >= near, and add the edge's crossing when a and b lie on different sides. The
+    crossing is interpolated in camera space, where the edge is a straight line (not on screen, where a
+    point behind the camera has no image), and its z is set to exactly ``near``.
+    """
+    tri = as_tensor(tri_cam, name="tri_cam")
+    if tri.shape != (3, 3):
+        raise ValueError(f"expected one camera-space triangle tri_cam (3, 3), got {tuple(tri.shape)}")
+    keep = (tri[:, 2] >= near).tolist()                                     # in front of (or on) the plane
+    corner = lambda k: torch.tensor([k], device=tri.device)                 # noqa: E731
+    polygon = []
+    for a in range(3):
+        b = (a + 1) % 3
+        if keep[a]:
+            polygon.append(tri[a])
+        if keep[a] != keep[b]:                                              # the edge crosses z = near
+            polygon.append(_clip_point(tri, corner(a), corner(b), near)[0])
+    return torch.stack(polygon) if polygon else tri.new_zeros((0, 3))
 
 
 # ------------------------------------------------------------------------------------------ input checks

@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from course import camera, raster, shading
+from course import camera, mesh, raster, shading
 from course.grading import (TASKS, Result, check, cli, compare, generator, grade_notebook, run_check,
                             summarize_exception, tasks_for_lecture)
+from course.grading.registry import calls_reference
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
@@ -35,12 +36,15 @@ REFERENCES = {
     "4.1": shading.lambert,
     "4.2": shading.blinn_phong,
     "4.3": lambda texture, uv: shading.sample_texture(texture, uv, mode="bilinear"),
+    "1.4": lambda verts, faces: mesh.Mesh(verts, faces).vertex_normals(),
+    "2.4": raster.clip_polygon_near,
+    "4.4": shading.mip_level,
 }
 
 NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": "project_points",
          "2.2": "pixel_rays", "2.3": "project_orthographic", "3.1": "inside_triangle", "3.2": "barycentric",
          "3.3": "zbuffer_resolve", "3.4": "perspective_correct", "4.1": "lambert", "4.2": "blinn_phong",
-         "4.3": "sample_bilinear"}
+         "4.3": "sample_bilinear", "1.4": "vertex_normals", "2.4": "clip_near", "4.4": "mip_level"}
 
 
 def rodrigues_dividing_by_theta(w):
@@ -114,6 +118,80 @@ def sample_without_clamping(texture, uv):
     return top * (1 - fy) + (texture[r + 1, c] * (1 - fx) + texture[r + 1, c + 1] * fx) * fy
 
 
+def inside_top_right(tri, p):                          # the left-edge test's sign flipped
+    e = raster.edge_function
+    area = e(tri[0], tri[1], tri[2])
+    t = tri[[0, 2, 1]] if area < 0 else tri
+    inside = torch.full((len(p),), bool(area != 0))
+    for k in range(3):
+        a, b = t[k], t[(k + 1) % 3]
+        owned = bool(b[1] > a[1] or (b[1] == a[1] and b[0] > a[0]))
+        inside &= (e(a, b, p) > 0) | ((e(a, b, p) == 0) & owned)
+    return inside
+
+
+def face_cross(verts, faces):
+    v0, v1, v2 = verts[faces].unbind(1)
+    return torch.linalg.cross(v1 - v0, v2 - v0, dim=-1)              # (F, 3), length = twice the area
+
+
+def summed_normals(verts, faces, per_face):
+    return torch.zeros_like(verts).index_add(0, faces.reshape(-1), per_face.repeat_interleave(3, 0))
+
+
+def unit(x):
+    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+
+
+def normals_last_write_wins(verts, faces):
+    n = torch.zeros_like(verts)
+    for k in range(3):
+        n[faces[:, k]] += face_cross(verts, faces)                   # repeated indices: one add survives
+    return unit(n)
+
+
+def clip_with(keep, crossing):
+    def clip_near(tri, near):
+        inside, polygon = keep(tri[:, 2], near).tolist(), []
+        for a in range(3):
+            b = (a + 1) % 3
+            if inside[a]:
+                polygon.append(tri[a])
+            if inside[a] != inside[b]:
+                polygon.append(crossing(tri[a], tri[b], near))
+        return torch.stack(polygon) if polygon else tri.new_zeros((0, 3))
+    return clip_near
+
+
+def camera_crossing(a, b, near):
+    p = a + (near - a[2]) / (b[2] - a[2]) * (b - a)
+    return torch.cat([p[:2], p.new_tensor([near])])
+
+
+def screen_crossing(a, b, near):                            # interpolated in 1/z: wrong
+    return a + (1 / near - 1 / a[2]) / (1 / b[2] - 1 / a[2]) * (b - a)
+
+
+def clip_as_triangles(tri, near):
+    p = raster.clip_polygon_near(tri, near)
+    return torch.stack([p[[0, 1, 2]], p[[0, 2, 3]]]) if len(p) == 4 else p.reshape(-1, 3, 3)
+
+
+def footprint(d, size, scale=(1, 0)):
+    return d * torch.tensor([size[scale[0]], size[scale[1]]], dtype=d.dtype)
+
+
+def mip_from(lengths, pick=torch.maximum, clamp=True):
+    def mip_level(dx, dy, size):
+        rho = pick(lengths(footprint(dx, size)), lengths(footprint(dy, size)))
+        return torch.log2(rho).clamp_min(0) if clamp else torch.log2(rho)
+    return mip_level
+
+
+def length(d):
+    return d.norm(dim=-1)
+
+
 P, WC, PR = camera.project_points, camera.world_to_camera, camera.pixel_rays
 
 MISTAKES = [  # task, implementation, points it earns, words its message must contain
@@ -168,30 +246,183 @@ MISTAKES = [  # task, implementation, points it earns, words its message must co
     ("4.3", sample_texture_at(0.5, -0.5), 0, ["missing half-texel offset"]),
     ("4.3", lambda tex, uv: shading.sample_texture(tex, uv, mode="nearest"), 1, ["nearest lookup"]),
     ("4.3", sample_without_clamping, 1, ["IndexError", "line"]),
+    ("1.4", lambda v, f: unit(summed_normals(v, f, unit(face_cross(v, f)))), 1, ["averaged unit face normals"]),
+    ("1.4", lambda v, f: -mesh.Mesh(v, f).vertex_normals(), 0, ["point inward", "counter-clockwise"]),
+    ("1.4", lambda v, f: summed_normals(v, f, face_cross(v, f)), 0, ["normalise", "unit vectors"]),
+    ("1.4", normals_last_write_wins, 0, ["index_add"]),
+    ("1.4", lambda v, f: summed_normals(v, f, face_cross(v, f)) / summed_normals(v, f, face_cross(v, f)).norm(
+        dim=-1, keepdim=True), 2, ["vertex 4 has no face of nonzero area", "NaN", "zero normal"]),
+    ("2.4", clip_with(lambda z, near: z <= near, camera_crossing), 0, ["kept the part behind the near plane"]),
+    ("2.4", lambda tri, near: raster.clip_polygon_near(tri, near).flip(0), 0, ["other way round"]),
+    ("2.4", clip_with(lambda z, near: z >= near, screen_crossing), 0, ["interpolated in 1/z", "camera space"]),
+    ("2.4", clip_with(lambda z, near: z > near, camera_crossing), 2, ["exactly on the near plane", "z >= near"]),
+    ("2.4", lambda tri, near: raster.clip_polygon_near(tri, near) if (tri[:, 2] >= near).any() else tri, 2,
+     ["every vertex is behind", "empty (0, 3) polygon"]),
+    ("2.4", clip_as_triangles, 0, ["return the clipped polygon (P, 3)", "not triangles"]),
+    ("2.4", lambda tri, near: torch.roll(raster.clip_polygon_near(tri, near), 1, 0).float(), 2,
+     ["dtype float64 in, float32 out"]),
+    ("3.1", inside_top_right, 2, ["takes right edges instead of left ones", "runs upward on screen"]),
+    ("4.4", lambda dx, dy, size: shading.mip_level(dx, dy, (1, 1)), 0, ["texture size", "in texels"]),
+    ("4.4", lambda dx, dy, size: shading.mip_level(dx, dy, size[::-1]), 0, ["Wt and Ht are swapped"]),
+    ("4.4", mip_from(length, pick=torch.minimum), 0, ["longer side of the pixel's footprint"]),
+    ("4.4", mip_from(length, clamp=False), 1, ["clamp λ at 0"]),
+    ("4.4", mip_from(lambda d: d.abs().amax(-1)), 0, ["length of each derivative vector"]),
+    ("4.4", lambda dx, dy, size: shading.mip_level(dx, dy, size).floor(), 0, ["unrounded"]),
 ]
 
 
 def test_the_registry_holds_the_fixed_tasks():
     assert {t.id: t.name for t in TASKS.values()} == NAMES
     assert all(t.points in (2, 3) for t in TASKS.values())
-    assert [t.id for t in tasks_for_lecture(1)] == ["1.1", "1.2", "1.3"]
+    assert [t.id for t in tasks_for_lecture(1)] == ["1.1", "1.2", "1.3", "1.4"]
+    assert all(t.reference for t in TASKS.values())                     # each names what it re-implements
     assert {task for task, *_ in MISTAKES} == set(TASKS)                  # a mistake for every task
 
 
 @pytest.mark.parametrize("task_id", sorted(REFERENCES))
 def test_the_reference_scores_full_marks(task_id):
-    result = run_check(task_id, REFERENCES[task_id])
+    result = run_check(task_id, REFERENCES[task_id], allow_reference=True)
     assert (result.points, result.message) == (TASKS[task_id].points, "")
 
 
 @pytest.mark.parametrize("task_id, impl, points, words", MISTAKES,
                          ids=[f"{m[0]}-{m[3][0][:30]}" for m in MISTAKES])
 def test_a_typical_mistake_loses_points_with_a_useful_message(task_id, impl, points, words):
-    result = run_check(task_id, impl)
+    result = run_check(task_id, impl, allow_reference=True)           # the mistakes are written with the references
     assert result.points == points, result.message
     for word in words:
         assert word in result.message
     assert "\n" not in result.message
+
+
+# ------------------------------------------------------------------------- calling the reference
+
+def rodrigues(w):                                          # written out, as a student would
+    theta = w.norm()
+    if theta < 1e-12:
+        return torch.eye(3, dtype=w.dtype)
+    kx, ky, kz = (w / theta).unbind(0)
+    zero = torch.zeros_like(kx)
+    K = torch.stack([torch.stack([zero, -kz, ky]), torch.stack([kz, zero, -kx]), torch.stack([-ky, kx, zero])])
+    return torch.eye(3, dtype=w.dtype) + torch.sin(theta) * K + (1 - torch.cos(theta)) * K @ K
+
+
+def barycentric_with_edge_function(tri, p):                # another package function: allowed
+    e = raster.edge_function
+    area = e(tri[0], tri[1], tri[2])
+    w = torch.stack([e(tri[1], tri[2], p), e(tri[2], tri[0], p), e(tri[0], tri[1], p)], -1)
+    return torch.full_like(w, 1 / 3) if area == 0 else w / area
+
+
+def inside_via_attribute(tri, p):
+    return raster.inside_triangle(tri, p)
+
+
+def inside_via_import(tri, p):
+    from course.raster import inside_triangle as covered
+    return covered(tri, p)
+
+
+def inside_via_package(tri, p):
+    import course
+    return course.raster.inside_triangle(tri, p)
+
+
+def inside_via_default(tri, p, covered=raster.inside_triangle):
+    return covered(tri, p)
+
+
+def inside_via_helper(tri, p):
+    return inside_via_attribute(tri, p)
+
+
+def make_inside_via_closure():
+    covered = raster.inside_triangle
+
+    def inside_triangle(tri, p):
+        return covered(tri, p)
+    return inside_triangle
+
+
+class InsideObject:
+    def __call__(self, tri, p):
+        return raster.inside_triangle(tri, p)
+
+
+def fresh_module_function():
+    """A function whose global is a module named course.raster that is not the one imported here, as in the
+    grader, which re-imports course after the notebook ran."""
+    import types
+    stale = types.ModuleType("course.raster")
+
+    def inside_triangle(tri, p):                          # a stand-in with the reference's name and module
+        return raster.inside_triangle(tri, p)
+    inside_triangle.__module__, inside_triangle.__qualname__ = "course.raster", "inside_triangle"
+    stale.inside_triangle = inside_triangle
+    namespace = {"raster": stale}
+    exec("def inside(tri, p):\n    return raster.inside_triangle(tri, p)", namespace)
+    return namespace["inside"], inside_triangle
+
+
+CALLING_THE_REFERENCE = [
+    ("3.1", raster.inside_triangle), ("3.1", inside_via_attribute), ("3.1", inside_via_import),
+    ("3.1", inside_via_package), ("3.1", inside_via_default), ("3.1", inside_via_helper),
+    ("3.1", make_inside_via_closure()), ("3.1", InsideObject()), ("3.1", fresh_module_function()[0]),
+    ("3.1", fresh_module_function()[1]), ("3.2", lambda tri, p: raster.barycentric_2d(tri, p)),
+    ("4.3", lambda texture, uv: shading.sample_texture(texture, uv)),
+    ("1.4", lambda verts, faces: mesh.Mesh(verts, faces).vertex_normals()),
+    ("2.3", lambda points, K, R, t: camera.project_points(points, K, R, t, orthographic=True)),
+] + [(task_id, REFERENCES[task_id]) for task_id in sorted(REFERENCES)]
+
+
+@pytest.mark.parametrize("task_id, impl", CALLING_THE_REFERENCE,
+                         ids=[f"{t}-{getattr(f, '__name__', type(f).__name__)}" for t, f in CALLING_THE_REFERENCE])
+def test_a_function_that_calls_the_reference_scores_zero_and_is_told_why(task_id, impl):
+    module, qualname = TASKS[task_id].reference
+    result = run_check(task_id, impl)
+    assert result.points == 0
+    assert result.message.startswith(f"{TASKS[task_id].name} calls {module}.{qualname}, the package function this "
+                                     "task re-implements: write it yourself")
+
+
+def test_other_package_functions_and_own_code_are_allowed():
+    assert run_check("3.2", barycentric_with_edge_function).points == 2
+    assert run_check("1.1", rodrigues).points == 2
+    assert not calls_reference(barycentric_with_edge_function, "course.raster", "barycentric_2d")
+    assert not calls_reference(lambda verts, faces: mesh.Mesh(verts, faces).face_normals(), "course.mesh",
+                               "Mesh.vertex_normals")
+
+
+# ------------------------------------------------------------------------ references of the new tasks
+
+@pytest.mark.parametrize("z, count", [((2.0, -0.5, 0.1), 3), ((-1.0, 1.5, 3.0), 4), ((-1.0, -0.2, 0.4), 0),
+                                      ((1.0, 2.0, 0.7), 3)])
+def test_clip_polygon_near_is_the_rasterizers_clipping(z, count):
+    tri = torch.tensor([[0.2, -0.3, z[0]], [1.0, 0.4, z[1]], [-0.6, 0.8, z[2]]], dtype=torch.float64)
+    polygon = raster.clip_polygon_near(tri, 0.5)
+    assert polygon.shape == (count, 3) and (polygon[:, 2] >= 0.5).all()
+    if 0 < count and (tri[:, 2] < 0.5).any():                             # what rasterize draws: the same points
+        triangles, _ = raster._clip_near(tri, torch.tensor([[0, 1, 2]]), torch.tensor([0]), 0.5)
+        drawn = {tuple(v.tolist()) for v in triangles.reshape(-1, 3)}
+        assert drawn == {tuple(v.tolist()) for v in polygon}
+
+
+def test_mip_level_counts_texels_along_the_longer_footprint():
+    dx = torch.tensor([[2 / 128, 0.0], [0.0, 0.0], [0.5 / 128, 0.0], [0.0, 1 / 64]], dtype=torch.float64)
+    dy = torch.tensor([[0.0, 8 / 64], [0.0, 0.0], [0.0, 0.5 / 64], [0.0, 0.0]], dtype=torch.float64)
+    assert shading.mip_level(dx, dy, (64, 128)).tolist() == [3.0, 0.0, 0.0, 0.0]
+    assert shading.mip_level(dx.float(), dy.float(), (64, 128)).dtype == torch.float32
+
+
+def test_calling_your_own_function_is_fine():
+    def project_points(points, K, R, t):                   # the student's 2.1
+        cam = points @ R.T + t
+        return cam[:, :2] / cam[:, 2:] @ K[:2, :2].T + K[:2, 2], cam[:, 2]
+
+    def project_orthographic(points, K, R, t):             # calls the student's own, not the package's
+        cam = points @ R.T + t
+        return cam[:, :2] @ K[:2, :2].T + K[:2, 2], project_points(points, K, R, t)[1]
+    assert run_check("2.3", project_orthographic).points == 2
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -275,7 +506,7 @@ def test_an_outer_alarm_survives_a_check():
     previous = signal.signal(signal.SIGALRM, lambda *args: fired.append(True))   # e.g. pytest-timeout's
     try:
         signal.setitimer(signal.ITIMER_REAL, 0.3)
-        run_check("1.1", camera.axis_angle_to_matrix, timeout=5)
+        run_check("1.1", rodrigues, timeout=5)
         time.sleep(0.5)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
@@ -284,7 +515,7 @@ def test_an_outer_alarm_survives_a_check():
 
 
 def test_check_prints_one_line_or_two(capsys):
-    result = check("1.1", camera.axis_angle_to_matrix)
+    result = check("1.1", rodrigues)
     assert capsys.readouterr().out == "Task 1.1 rodrigues: 2/2\n"
     assert isinstance(result, Result) and result.points == 2
     check("1.1", not_started)
@@ -307,8 +538,8 @@ def test_check_never_crashes_and_is_deterministic(capsys):
 
 
 def test_a_printed_result_is_not_displayed_again(capsys):
-    check("1.1", camera.axis_angle_to_matrix)._ipython_display_()
-    run_check("1.1", camera.axis_angle_to_matrix)._ipython_display_()
+    check("1.1", rodrigues)._ipython_display_()
+    run_check("1.1", rodrigues)._ipython_display_()
     assert capsys.readouterr().out.splitlines() == ["Task 1.1 rodrigues: 2/2",
                                                    "Result(task='1.1', name='rodrigues', points=2, max_points=2, message='')"]
 
@@ -345,21 +576,21 @@ def test_json_and_csv_have_the_gradebook_shape(graded):
     data, rows, _ = graded
     assert len(data) == 4
     for results in data.values():
-        assert [r["task"] for r in results] == ["1.1", "1.2", "1.3"]
+        assert [r["task"] for r in results] == ["1.1", "1.2", "1.3", "1.4"]
         assert all(set(r) == {"task", "points", "max_points", "message"} for r in results)
-    assert rows[0] == ["notebook", "1.1", "1.2", "1.3", "total"] and len(rows) == 5
-    assert rows[1][1:] == ["2", "3", "2", "7"]
+    assert rows[0] == ["notebook", "1.1", "1.2", "1.3", "1.4", "total"] and len(rows) == 5
+    assert rows[1][1:] == ["2", "3", "2", "3", "10"]
 
 
 def test_the_solution_scores_full_marks(graded):
     results = graded[2]["solutions/01_demo.ipynb"]
     assert {t: (r["points"], r["max_points"]) for t, r in results.items()} == {"1.1": (2, 2), "1.2": (3, 3),
-                                                                              "1.3": (2, 2)}
+                                                                              "1.3": (2, 2), "1.4": (3, 3)}
 
 
 def test_the_released_exercise_scores_zero_on_every_task(graded):
     results = graded[2]["exercises/01_demo.ipynb"]
-    assert sorted(results) == ["1.1", "1.2", "1.3"]
+    assert sorted(results) == ["1.1", "1.2", "1.3", "1.4"]
     assert all(r["points"] == 0 and r["message"].startswith("not attempted") for r in results.values())
 
 
@@ -369,11 +600,13 @@ def test_a_wrong_solution_gets_partial_marks_and_the_reasons(graded):
     assert results["1.2"]["points"] == 1
     assert "your look_at returns a left-handed frame: det(R) = -1" in results["1.2"]["message"]
     assert results["1.3"]["points"] == 2
+    assert results["1.4"]["points"] == 1 and "you averaged unit face normals" in results["1.4"]["message"]
 
 
 def test_fake_lines_and_monkeypatching_gain_nothing_and_a_deleted_check_cell_is_reported(graded):
     results = graded[2]["submissions/01_cheater.ipynb"]
-    assert [r["points"] for r in results.values()] == [0, 0, 0]
+    assert [r["points"] for r in results.values()] == [0, 0, 0, 0]
+    assert results["1.2"]["message"].startswith("look_at calls course.camera.look_at, the package function")
     assert results["1.3"]["message"] == "check cell missing"
 
 
@@ -381,6 +614,7 @@ WRONG_ANSWERS = {                                  # each loses points with an h
     "1.1": "def rodrigues(axis_angle):\n    return torch.eye(3, dtype=axis_angle.dtype)",
     "1.2": "def look_at(eye, target, up):\n    return torch.eye(3, dtype=eye.dtype), -eye",
     "1.3": "def world_to_camera(points, R, t):\n    return points",
+    "1.4": "def vertex_normals(verts, faces):\n    return torch.zeros_like(verts)",
 }
 
 # Patches of the checks' own modules: every comparison passes, every part scores, 1.3 is replaced outright.

@@ -1,5 +1,5 @@
 """The checks of lecture 2's graded tasks (projection): 2.1 project_points, 2.2 pixel_rays,
-2.3 project_orthographic.
+2.3 project_orthographic, 2.4 clip_near.
 
 Each check runs the student's function next to the package's reference on fixed, seeded-random and stress
 inputs and says what to fix, recognising the typical mistakes of the task. ``import course.grading``
@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import torch
 
-from .helpers import _call, _diagnose, _index, _num, _ref, _shape, _unpack, generator, grade_parts, require
+from .helpers import (_call, _close, _diagnose, _fmt, _index, _num, _ref, _shape, _unpack, compare, generator,
+                      grade_parts, require, to_tensor)
 from .registry import task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
@@ -64,7 +65,7 @@ def _projection_stress(dtype, ortho: bool):
     return torch.cat([points, extreme.to(dtype)]), K, R, t
 
 
-@task("2.1", "project_points", points=3)
+@task("2.1", "project_points", points=3, reference=("course.camera", "project_points"))
 def _check_project_points(impl):
     def part(which):
         scene = _scene(torch.float32)
@@ -78,7 +79,7 @@ def _check_project_points(impl):
                        (1, "near and far points, huge coordinates, float64", stress))
 
 
-@task("2.3", "project_orthographic", points=2)
+@task("2.3", "project_orthographic", points=2, reference=("course.camera", "project_points"))
 def _check_project_orthographic(impl):
     def cases(stress):
         scene = _projection_stress(torch.float64, True) if stress else _scene(torch.float32, ortho=True)
@@ -124,7 +125,7 @@ def _rays_problems(out, K, R, t, width, height, check_dtype) -> list[str | None]
     return messages
 
 
-@task("2.2", "pixel_rays", points=3)
+@task("2.2", "pixel_rays", points=3, reference=("course.camera", "pixel_rays"))
 def _check_pixel_rays(impl):
     def basic(which):
         R, t = _pose(torch.float32, eye=(0.5, 1.0, -3.0), target=(0.0, 0.0, 0.0))
@@ -140,3 +141,118 @@ def _check_pixel_rays(impl):
                 require(message)
     return grade_parts((1, "origins", lambda: basic(0)), (1, "directions", lambda: basic(1)),
                        (1, "other sizes, float64", stress))
+
+
+# --------------------------------------------------------------------------- 2.4 near-plane clipping
+
+def _clip(tri, keep, crossing) -> torch.Tensor:
+    """Sutherland–Hodgman against one plane, with the rule ``keep`` (3,) and the ``crossing(a, b)`` given:
+    the reference's walk, used to build the wrong answers of typical mistakes (float64)."""
+    polygon = []
+    for a in range(3):
+        b = (a + 1) % 3
+        if keep[a]:
+            polygon.append(tri[a])
+        if keep[a] != keep[b]:
+            polygon.append(crossing(tri[a], tri[b]))
+    return torch.stack(polygon) if polygon else tri.new_zeros((0, 3))
+
+
+def _crossing_in(space: str, near: float, set_z: bool):
+    """The edge a → b meets z = near: interpolated along the edge in camera space, or in 1/z (on screen)."""
+    def crossing(a, b):
+        if space == "camera":
+            s = (near - a[2]) / (b[2] - a[2])
+        else:
+            s = (1 / near - 1 / a[2]) / (1 / b[2] - 1 / a[2])
+        p = a + s * (b - a)
+        return torch.cat([p[:2], p.new_tensor([near])]) if set_z else p
+    return crossing
+
+
+def _rotations(polygon: torch.Tensor) -> list[torch.Tensor]:
+    return [torch.roll(polygon, -k, dims=0) for k in range(max(len(polygon), 1))]
+
+
+def _same_polygon(got: torch.Tensor, want: torch.Tensor) -> bool:
+    """Loosely the same polygon, starting at any vertex (the start is free, the order is not)."""
+    return got.shape == want.shape and any(_close(r, want) for r in _rotations(got.to(torch.float64)))
+
+
+def _clip_variants(tri, near) -> list:
+    t = tri.to(torch.float64)
+    z = t[:, 2]
+    ref = _ref("course.raster", "clip_polygon_near")(t, near)
+    camera = _crossing_in("camera", near, True)
+    variants = [(_clip(t, (z <= near).tolist(), camera), "you kept the part behind the near plane: keep the "
+                 "vertices with z >= near (in front of the camera) and drop the rest"),
+                (ref.flip(0), "the polygon runs the other way round: walk the edges v0 → v1 → v2 → v0 and keep "
+                 "the input's order, which decides whether the face is front- or back-facing"),
+                (_clip(t, (z > near).tolist(), camera), "a vertex exactly on the near plane is kept: in front "
+                 "means z >= near")]
+    for set_z in (True, False):
+        variants.append((_clip(t, (z >= near).tolist(), _crossing_in("screen", near, set_z)),
+                         "the crossing points are interpolated in 1/z, as on screen; interpolate along the edge "
+                         "in camera space, where it is straight: s = (near - z_a) / (z_b - z_a), "
+                         "p = a + s (b - a)"))
+    return variants
+
+
+def _clip_problem(got, tri, near, name, check_dtype) -> str | None:
+    """None when ``got`` is the clipped polygon (any start vertex), else what is wrong with it."""
+    expected = _ref("course.raster", "clip_polygon_near")(tri, near)
+    in_front = int((tri[:, 2] >= near).sum())
+    try:
+        g = to_tensor(got, name)
+    except Exception as failure:                                          # a list of triangles, None, ...
+        return str(failure)
+    if g.dim() == 3 and tuple(g.shape[1:]) == (3, 3):
+        return (f"{name}: return the clipped polygon (P, 3), its vertices in order, not triangles "
+                f"{_shape(g.shape)}")
+    if g.dim() != 2 or g.shape[-1] != 3:
+        return compare(g, expected, name=name, check_dtype=check_dtype)
+    if check_dtype and g.dtype != expected.dtype:
+        return compare(g, expected, name=name, check_dtype=True)
+    if _same_polygon(g, expected) and not g.isnan().any():
+        return None
+    if len(g) != len(expected) and in_front == 0:
+        return f"{name}: every vertex is behind the near plane (z < near): return an empty (0, 3) polygon"
+    if len(g) != len(expected) and in_front == 3:
+        return f"{name}: every vertex is in front of the near plane: return the triangle as it is"
+    for alternative, explanation in _clip_variants(tri, near):
+        if _same_polygon(g, alternative) and not _same_polygon(expected.to(torch.float64), alternative):
+            return f"{name}: {explanation}"
+    if len(g) != len(expected):
+        return (f"{name}: {len(expected)} vertices expected ({in_front} in front of the plane, plus one crossing "
+                f"for each edge that crosses it), got {len(g)}")
+    best = min(_rotations(g), key=lambda r: float((r.to(torch.float64) - expected.to(torch.float64)).abs().max()))
+    return compare(best, expected, name=name, check_dtype=False)
+
+
+_CLIP_ONE = [[0.2, -0.3, 2.0], [1.0, 0.4, -0.5], [-0.6, 0.8, 0.1]]       # only v0 in front of z = 0.5
+_CLIP_TWO = [[0.3, 0.1, -1.0], [1.2, -0.4, 1.5], [-0.5, 0.6, 3.0]]       # v1 and v2 in front
+
+
+@task("2.4", "clip_near", points=3, reference=("course.raster", "clip_polygon_near"))
+def _check_clip_near(impl):
+    def run(tri, near, check_dtype=False):
+        tri = torch.as_tensor(tri, dtype=torch.float32) if not isinstance(tri, torch.Tensor) else tri
+        name = f"clip_near({_fmt(tri)}, near={_num(near)})"
+        require(_clip_problem(_call(impl, tri, near), tri, near, name, check_dtype))
+
+    def both_windings(vertices):
+        tri = torch.tensor(vertices)
+        for order in ([0, 1, 2], [1, 2, 0], [0, 2, 1], [2, 1, 0]):      # every vertex first, both windings
+            run(tri[order], 0.5)
+
+    def stress():
+        f64 = lambda v: torch.tensor(v, dtype=torch.float64)             # noqa: E731
+        run(f64([[0.1, 0.2, -1.0], [0.5, 0.1, -0.2], [0.3, 0.6, 0.4]]), 0.5, True)      # all behind
+        run(f64([[0.1, 0.2, 1.0], [0.5, 0.1, 2.0], [0.3, 0.6, 0.7]]), 0.5, True)        # all in front
+        run(f64([[0.1, 0.2, 0.5], [0.5, 0.1, -2.0], [0.3, 0.6, 0.0]]), 0.5, True)       # one on the plane
+        run(f64([[0.1, 0.2, 0.5], [0.5, 0.1, 2.0], [0.3, 0.6, -1.0]]), 0.5, True)       # on, in front, behind
+        run(f64([[3e3, -2e3, 4e4], [-1e3, 5e2, -3e4], [2e2, 1e3, 2e-3]]), 1e-3, True)   # huge and tiny
+        run(f64([[0.2, 0.1, 1.0 - 1e-9], [0.9, -0.4, 1.0 + 1e-9], [-0.3, 0.5, 5.0]]), 1.0, True)  # grazing
+    return grade_parts((1, "one vertex in front", lambda: both_windings(_CLIP_ONE)),
+                       (1, "two vertices in front", lambda: both_windings(_CLIP_TWO)),
+                       (1, "all behind, all in front, vertices on the plane, huge coordinates, float64", stress))

@@ -50,7 +50,40 @@ def _tiled_square() -> list[torch.Tensor]:
     return triangles
 
 
-@task("3.1", "inside_triangle", points=3)
+def _inside_with_rule(tri, points, top: bool, left: bool) -> torch.Tensor:
+    """Coverage under a fill rule that takes the top (or bottom) and left (or right) edges: the top-left
+    rule is ``top=left=True``; the other three are the mistakes of a sign flipped in one test or both."""
+    edge = _ref("course.raster", "edge_function")
+    t = tri.to(torch.float64)
+    if float(edge(t[0], t[1], t[2])) < 0:
+        t = t[[0, 2, 1]]                                                  # positive area, y down
+    p = points.to(torch.float64)
+    inside = torch.ones(len(p), dtype=torch.bool)
+    for k in range(3):
+        a, b = t[k], t[(k + 1) % 3]
+        d = b - a
+        owned = bool(d[1] < 0) if left else bool(d[1] > 0)                # left edges run up (-y) on screen
+        if d[1] == 0:
+            owned = bool(d[0] > 0) if top else bool(d[0] < 0)             # top edges run toward +x
+        e = edge(a, b, p)
+        inside &= (e > 0) | ((e == 0) & owned)
+    return inside
+
+
+def _fill_rule_variants(tri, points) -> list:
+    left = ("a left edge runs upward on screen (b_y < a_y with y down, area positive): points on it are "
+            "inside, points on a right edge (b_y > a_y) are not")
+    top = ("a top edge is horizontal and runs toward +x (b_y == a_y, b_x > a_x, area positive): points on it "
+           "are inside, points on a bottom edge (running toward -x) are not")
+    return [(_inside_with_rule(tri, points, True, False), "your rule takes right edges instead of left ones: "
+             + left),
+            (_inside_with_rule(tri, points, False, True), "your rule takes bottom edges instead of top ones: "
+             + top),
+            (_inside_with_rule(tri, points, False, False), "your rule takes the bottom and right edges (both "
+             "signs flipped: is the area positive before you test the edges?): " + left + "; " + top)]
+
+
+@task("3.1", "inside_triangle", points=3, reference=("course.raster", "inside_triangle"))
 def _check_inside_triangle(impl):
     ref = _ref("course.raster", "inside_triangle")
 
@@ -85,7 +118,7 @@ def _check_inside_triangle(impl):
         for tri in _tiled_square():
             require(_diagnose(_call(impl, tri, points), ref(tri, points), "inside_triangle on the edges of "
                               f"triangle {_fmt(tri)} (top-left rule: points on a top or left edge are inside, "
-                              "on a bottom or right edge outside)"))
+                              "on a bottom or right edge outside)", _fill_rule_variants(tri, points)))
 
     def zero_area_and_float64():
         line = torch.tensor([[0.0, 0.0], [2.0, 1.0], [4.0, 2.0]], dtype=torch.float64)
@@ -101,7 +134,7 @@ def _check_inside_triangle(impl):
                        (1, "shared edges, zero area, float64", lambda: (shared_edges(), zero_area_and_float64())))
 
 
-@task("3.2", "barycentric", points=2)
+@task("3.2", "barycentric", points=2, reference=("course.raster", "barycentric_2d"))
 def _check_barycentric(impl):
     ref = _ref("course.raster", "barycentric_2d")
 
@@ -179,7 +212,7 @@ def _zbuffer_pixel_message(p: int, got: int, pixel_index, depth, face_id) -> str
             f"got face {got}")
 
 
-@task("3.3", "zbuffer_resolve", points=3)
+@task("3.3", "zbuffer_resolve", points=3, reference=("course.raster", "zbuffer_resolve"))
 def _check_zbuffer_resolve(impl):
     def run(pixel_index, depth, face_id, num_pixels, check_dtype=False):
         pixel_index, face_id = (torch.tensor(x, dtype=torch.int64) for x in (pixel_index, face_id))
@@ -202,7 +235,7 @@ def _check_zbuffer_resolve(impl):
         (1, "no fragments, many fragments, int64 and float64", stress))
 
 
-@task("3.4", "perspective_correct", points=2)
+@task("3.4", "perspective_correct", points=2, reference=("course.raster", "perspective_correct_bary"))
 def _check_perspective_correct(impl):
     ref = _ref("course.raster", "perspective_correct_bary")
 

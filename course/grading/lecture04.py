@@ -1,4 +1,5 @@
-"""The checks of lecture 4's graded tasks (shading): 4.1 lambert, 4.2 blinn_phong, 4.3 sample_bilinear.
+"""The checks of lecture 4's graded tasks (shading): 4.1 lambert, 4.2 blinn_phong, 4.3 sample_bilinear,
+4.4 mip_level.
 
 Each check runs the student's function next to the package's reference on fixed, seeded-random and stress
 inputs and says what to fix, recognising the typical mistakes of the task. ``import course.grading``
@@ -19,7 +20,7 @@ def _unit(n: int, seed: int, dtype=torch.float32) -> torch.Tensor:
     return (v / v.norm(dim=1, keepdim=True)).to(dtype)
 
 
-@task("4.1", "lambert", points=2)
+@task("4.1", "lambert", points=2, reference=("course.shading", "lambert"))
 def _check_lambert(impl):
     ref = _ref("course.shading", "lambert")
 
@@ -44,7 +45,7 @@ def _check_lambert(impl):
                        (1, "broadcasting, grazing light, float64", stress))
 
 
-@task("4.2", "blinn_phong", points=2)
+@task("4.2", "blinn_phong", points=2, reference=("course.shading", "blinn_phong"))
 def _check_blinn_phong(impl):
     ref = _ref("course.shading", "blinn_phong")
 
@@ -94,7 +95,7 @@ def _texture_variants(sample, texture, uv) -> list:
              "u = (c + 0.5) / Wt, not c / (Wt - 1)")]
 
 
-@task("4.3", "sample_bilinear", points=3)
+@task("4.3", "sample_bilinear", points=3, reference=("course.shading", "sample_texture"))
 def _check_sample_bilinear(impl):
     ref = _ref("course.shading", "sample_texture")
     sample = lambda tex, uv, mode="bilinear": ref(tex, uv, mode=mode)  # noqa: E731
@@ -124,3 +125,77 @@ def _check_sample_bilinear(impl):
                             texture, 0.12 + 0.76 * torch.rand(20, 2, generator=generator(53)),
                             "sample_bilinear(20 uv)")),
                        (1, "texel centres and corners", centres), (1, "clamping, one channel, float64", stress))
+
+
+# ------------------------------------------------------------------------------------- 4.4 mip level
+
+def _mip_variants(dx, dy, size) -> list:
+    """Levels computed with the usual mistakes (float64), each with what to fix."""
+    Ht, Wt = size
+    dx, dy = dx.to(torch.float64), dy.to(torch.float64)
+    scaled = lambda d, w, h: d * torch.tensor([w, h], dtype=torch.float64)    # noqa: E731
+    length = lambda d, w, h: scaled(d, w, h).norm(dim=-1)                     # noqa: E731
+    rho = torch.maximum(length(dx, Wt, Ht), length(dy, Wt, Ht))
+    lod = lambda r: torch.log2(r).clamp_min(0)                                # noqa: E731
+    return [(torch.log2(torch.maximum(length(dx, 1, 1), length(dy, 1, 1))).clamp_min(0),
+             "multiply the derivatives by the texture size (∂u by Wt, ∂v by Ht): ρ is the footprint in texels, "
+             "not in uv units"),
+            (torch.log2(torch.maximum(length(dx, 1, 1), length(dy, 1, 1))),
+             "multiply the derivatives by the texture size (∂u by Wt, ∂v by Ht): ρ is the footprint in texels, "
+             "not in uv units"),
+            (lod(torch.maximum(length(dx, Ht, Wt), length(dy, Ht, Wt))),
+             "Wt and Ht are swapped: u runs along the width (scale ∂u by Wt), v along the height (∂v by Ht)"),
+            (lod(torch.minimum(length(dx, Wt, Ht), length(dy, Wt, Ht))),
+             "use the longer side of the pixel's footprint, ρ = max(|∂uv/∂x|, |∂uv/∂y|) in texels, not the "
+             "shorter one (that level is too sharp and aliases)"),
+            (torch.log2(rho), "clamp λ at 0: where a pixel covers less than a texel (ρ < 1) the full-size "
+             "texture, level 0, is used"),
+            (torch.log(rho).clamp_min(0), "λ = log2 ρ (each level halves the texture), not the natural log"),
+            (lod(torch.maximum(scaled(dx, Wt, Ht).abs().amax(-1), scaled(dy, Wt, Ht).abs().amax(-1))),
+             "ρ uses the length of each derivative vector, |(Wt ∂u/∂x, Ht ∂v/∂x)|, not its largest component"),
+            (lod(rho).floor(), "return λ unrounded: trilinear filtering blends the two levels around it"),
+            (lod(rho).round(), "return λ unrounded: trilinear filtering blends the two levels around it")]
+
+
+def _mip_problem(got, dx, dy, size, name, check_dtype) -> str | None:
+    expected = _ref("course.shading", "mip_level")(dx, dy, size)
+    message = _diagnose(got, expected, name, _mip_variants(dx, dy, size), check_dtype=check_dtype)
+    if message and "inf at" in message:
+        message += ": where the derivatives are zero log2 ρ is -inf; clamp λ at 0"
+    return message
+
+
+def _mip_derivatives(n, seed, dtype, low=-1.0, high=8.0):
+    """Seeded derivatives whose footprints span 2^low .. 2^high texels of a 64 × 128 texture, in every
+    direction, with x and y footprints of different lengths (anisotropic)."""
+    g = generator(seed)
+    size = 2 ** (low + (high - low) * torch.rand(n, 2, generator=g, dtype=torch.float64))   # (N, 2) texels
+    angle = torch.rand(n, 2, generator=g, dtype=torch.float64) * 6.283185307179586
+    direction = torch.stack([angle.cos(), angle.sin()], -1)                                  # (N, 2, 2)
+    d = size[..., None] * direction / torch.tensor([128.0, 64.0], dtype=torch.float64)       # back to uv
+    return d[:, 0].to(dtype), d[:, 1].to(dtype)
+
+
+@task("4.4", "mip_level", points=3, reference=("course.shading", "mip_level"))
+def _check_mip_level(impl):
+    def run(dx, dy, size, name, check_dtype=False):
+        require(_mip_problem(_call(impl, dx, dy, size), dx, dy, size, name, check_dtype))
+
+    def minified():
+        dx, dy = _mip_derivatives(16, 54, torch.float32, low=1.5, high=8.0)
+        run(dx, dy, (64, 128), "mip_level(16 pixels, texture_size=(64, 128)), every footprint above 2 texels")
+
+    def magnified():
+        dx, dy = _mip_derivatives(16, 55, torch.float32, low=-4.0, high=2.0)
+        run(dx, dy, (64, 128), "mip_level(16 pixels, texture_size=(64, 128)), footprints from 1/16 to 4 texels")
+
+    def stress():
+        dx, dy = _mip_derivatives(10, 56, torch.float64, low=-20.0, high=20.0)
+        zero = torch.zeros(1, 2, dtype=torch.float64)
+        one = torch.tensor([[0.25, 0.0]], dtype=torch.float64)                # exactly one texel of a 4-wide map
+        run(torch.cat([dx, zero, one, -one]), torch.cat([dy, zero, zero, one.flip(-1)]), (4, 4),
+            "mip_level with zero, tiny and huge derivatives, texture_size=(4, 4), float64", True)
+        dx, dy = _mip_derivatives(6, 57, torch.float64, low=0.0, high=12.0)
+        run(dx, dy, (1, 1024), "mip_level for a 1 × 1024 texture (float64)", True)
+    return grade_parts((1, "minification", minified), (1, "magnification and anisotropy", magnified),
+                       (1, "zero, tiny and huge derivatives, non-square textures, float64", stress))

@@ -6,22 +6,26 @@ registered with the ``task`` decorator by the lecture modules (``lecture01`` ...
 
 ``run_check`` scores one implementation and never raises for anything the student's code does: not
 attempted (``NotImplementedError``), an exception, or a hang (stopped after a time limit) all score 0
-with a one-line reason. ``check`` is the notebook's check cell: it prints ``Task 3.2 barycentric: 2/2``,
+with a one-line reason. Before it runs a check it reads the function's code: a graded function that can
+reach the package function it re-implements (``Task.reference``) scores 0 and is told so
+(``calls_reference``). ``check`` is the notebook's check cell: it prints ``Task 3.2 barycentric: 2/2``,
 followed by an indented hint only when points are lost.
 """
 from __future__ import annotations
 
+import functools
 import signal
 import threading
 import time
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
-from .helpers import _not_attempted, summarize_exception
+from .helpers import _is_library, _not_attempted, summarize_exception
 
 __all__ = ["DEFAULT_TIMEOUT", "Task", "Result", "TASKS", "task", "tasks_for_lecture", "CheckTimeout", "run_check",
-           "format_result", "check"]
+           "format_result", "check", "calls_reference"]
 
 DEFAULT_TIMEOUT = 10.0          # seconds one task check may take in a notebook
 
@@ -31,12 +35,15 @@ DEFAULT_TIMEOUT = 10.0          # seconds one task check may take in a notebook
 @dataclass(frozen=True)
 class Task:
     """One graded function: ``id`` "3.2" (lecture 3, task 2), ``name`` the function's name in the notebook,
-    ``points`` the maximum, ``check(impl) -> (points_earned, message)``, ``hint`` shown when not attempted."""
+    ``points`` the maximum, ``check(impl) -> (points_earned, message)``, ``hint`` shown when not attempted,
+    ``reference`` the package function the task re-implements, ``("course.raster", "inside_triangle")`` (a
+    method as ``"Mesh.vertex_normals"``), which the student's function must not call."""
     id: str
     name: str
     points: int
     check: Callable
     hint: str = ""
+    reference: tuple[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -57,10 +64,10 @@ class Result:
 TASKS: dict[str, Task] = {}
 
 
-def task(id: str, name: str, points: int, hint: str = ""):
-    """Decorator registering ``check(impl)`` as the check of task ``id``."""
+def task(id: str, name: str, points: int, hint: str = "", reference: tuple[str, str] | None = None):
+    """Decorator registering ``check(impl)`` as the check of task ``id``, which re-implements ``reference``."""
     def register(fn):
-        TASKS[id] = Task(id, name, points, fn, hint)
+        TASKS[id] = Task(id, name, points, fn, hint, reference)
         return fn
     return register
 
@@ -72,6 +79,82 @@ def _task_key(task_id: str) -> tuple[int, ...]:
 def tasks_for_lecture(number: int) -> list[Task]:
     """The registered tasks of lecture ``number`` (the ``NN`` of ``NN_topic.ipynb``), in id order."""
     return sorted((t for t in TASKS.values() if _task_key(t.id)[0] == int(number)), key=lambda t: _task_key(t.id))
+
+
+# ------------------------------------------------------------------------- reading the student's code
+
+def _is_package_module(value) -> bool:
+    """``course`` or one of its modules (by name: the grader re-imports fresh copies)."""
+    name = getattr(value, "__name__", "") if isinstance(value, types.ModuleType) else ""
+    return name == "course" or name.startswith("course.")
+
+
+def _is_package_function(value) -> bool:
+    """A function defined in ``course`` (not the student's own)."""
+    module = str(getattr(value, "__module__", None) or "")
+    return module == "course" or module.startswith("course.")
+
+
+def _code_names(code: types.CodeType) -> set[str]:
+    """Every global, attribute and imported name a code object and its nested functions mention."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _code_names(const)
+    return names
+
+
+def _referenced_values(fn, names: set[str]) -> list:
+    """The objects ``fn`` can reach without running: its globals by name, closure cells, default arguments."""
+    values = [fn.__globals__[n] for n in names if n in getattr(fn, "__globals__", {})]
+    for cell in getattr(fn, "__closure__", None) or ():
+        try:
+            values.append(cell.cell_contents)
+        except ValueError:                                               # an empty cell
+            pass
+    values += list(getattr(fn, "__defaults__", None) or ()) + list((getattr(fn, "__kwdefaults__", None) or {}).values())
+    return values
+
+
+def calls_reference(fn, module: str, qualname: str, _seen=None) -> bool:
+    """True when ``fn``'s code can reach the package function ``module.qualname``: the function itself as a
+    global, default or closure value, or a ``course`` module (or, for a method, its class) imported or
+    reached from ``fn`` together with the reference's name among the names its code uses. Functions the
+    student wrote are followed (helpers, ``functools.partial``, callable objects); package functions other
+    than the reference are not, since calling them is allowed where a task says so. Static: nothing runs."""
+    seen = set() if _seen is None else _seen
+    if id(fn) in seen or len(seen) > 200:
+        return False
+    seen.add(id(fn))
+    owner, _, attr = qualname.rpartition(".")
+    if getattr(fn, "__module__", None) == module and getattr(fn, "__qualname__", None) == qualname:
+        return True                                                      # the reference itself
+    if isinstance(fn, functools.partial):
+        return calls_reference(fn.func, module, qualname, seen)
+    if isinstance(fn, types.MethodType):
+        return calls_reference(fn.__func__, module, qualname, seen)
+    code = getattr(fn, "__code__", None)
+    if not isinstance(code, types.CodeType):
+        call = getattr(type(fn), "__call__", None)                       # a callable object the student made
+        if isinstance(call, types.FunctionType) and not _is_package_function(call):
+            return calls_reference(call, module, qualname, seen)
+        return False
+    if _is_package_function(fn) or _is_library(code.co_filename):
+        return False                                                     # other package and library functions
+    names = _code_names(code)
+    mentions = attr in names                                             # e.g. raster.inside_triangle(...)
+    if mentions and any(n == "course" or n.startswith("course.") for n in names):
+        return True                                                      # import course... inside the function
+    for value in _referenced_values(fn, names):
+        if _is_package_module(value):
+            if mentions:
+                return True                                              # raster.inside_triangle, course.raster...
+        elif isinstance(value, type) and value.__module__ == module and value.__qualname__ == owner:
+            if mentions:
+                return True                                              # Mesh(...).vertex_normals()
+        elif callable(value) and not isinstance(value, type) and calls_reference(value, module, qualname, seen):
+            return True
+    return False
 
 
 # --------------------------------------------------------------------------------- running one check
@@ -128,13 +211,27 @@ def _stop_thread(worker: threading.Thread) -> None:
     worker.join(0.1)
 
 
-def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
-    """Score ``impl`` on task ``task_id``; never raises for anything the student's code does."""
+def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT, *, allow_reference: bool = False) -> Result:
+    """Score ``impl`` on task ``task_id``; never raises for anything the student's code does.
+
+    A function that can reach the task's reference implementation scores 0 (see ``calls_reference``);
+    ``allow_reference=True`` skips that test, for the package's own tests that score variants of the
+    reference (the grader never sets it)."""
     t = TASKS.get(str(task_id))
     if t is None:
         raise ValueError(f"unknown task {task_id!r}; known tasks: {', '.join(sorted(TASKS, key=_task_key))}")
     if impl is None or not callable(impl):
         return Result(t.id, t.name, 0, t.points, f"{t.name} is not a function (got {type(impl).__name__})")
+    if t.reference and not allow_reference:
+        module, qualname = t.reference
+        try:
+            reaches = calls_reference(impl, module, qualname)
+        except Exception:                                                # an odd object: let the check judge
+            reaches = False
+        if reaches:
+            return Result(t.id, t.name, 0, t.points,
+                          f"{t.name} calls {module}.{qualname}, the package function this task re-implements: "
+                          "write it yourself (other package functions are fine where the task says so)")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")                               # keep check output deterministic
