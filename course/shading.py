@@ -39,7 +39,7 @@ __all__ = [
     "AmbientLight", "DirectionalLight", "PointLight", "Material",
     "normalize", "lambert", "blinn_phong", "phong", "sample_texture", "light_terms", "shade",
     "view_directions", "flat_shading", "gouraud_shading", "phong_shading", "edge_distance",
-    "wireframe_overlay", "linear_to_srgb", "srgb_to_linear",
+    "wireframe_overlay", "linear_to_srgb", "srgb_to_linear", "mip_level",
 ]
 
 EPS = 1e-12            # lengths below sqrt(EPS) count as zero in normalize()
@@ -438,7 +438,8 @@ def srgb_to_linear(encoded) -> torch.Tensor:
     return torch.where(curve, ((safe + 0.055) / 1.055) ** 2.4, c / 12.92)
 
 
-# ---- reference for task 4.4
+# ------------------------------------------------------------------------------ mip levels (task 4.4)
+
 def mip_level(duv_dx, duv_dy, texture_size) -> torch.Tensor:
     """The mip level λ (level of detail) a pixel samples a texture at, from its screen-space uv derivatives.
 
@@ -451,11 +452,11 @@ def mip_level(duv_dx, duv_dy, texture_size) -> torch.Tensor:
     """
     dx = as_tensor(duv_dx, name="duv_dx")
     dy = as_tensor(duv_dy, dtype=dx.dtype, device=dx.device, name="duv_dy")
+    if dx.shape != dy.shape or dx.shape[-1:] != (2,):
+        raise ValueError(f"duv_dx and duv_dy must both have shape (N, 2), got {tuple(dx.shape)} and {tuple(dy.shape)}")
     height, width = (float(s) for s in texture_size)
     texels = torch.tensor([width, height], dtype=dx.dtype, device=dx.device)   # u counts columns, v rows
     rho = torch.maximum(torch.linalg.vector_norm(dx * texels, dim=-1),
                         torch.linalg.vector_norm(dy * texels, dim=-1))         # (N,) footprint in texels
     return torch.log2(rho.clamp_min(1.0))
 
-
-__all__ += ["mip_level"]
