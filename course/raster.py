@@ -328,8 +328,13 @@ def _project(p_cam, camera, K):
     return (xy1 @ K.T)[..., :2], q
 
 
-def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriangles:
-    """Stage 1: drop faces outside [near, far] or facing away, clip at the near plane, project to pixels."""
+def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float = 0.5) -> _ScreenTriangles:
+    """Stage 1: drop faces outside [near, far] or facing away, clip at the near plane, project to pixels.
+
+    reach: how far inside the image a triangle must reach to be kept. 0.5 (pixel centres, for
+    ``rasterize``) drops triangles that cover no pixel centre; 0.0 keeps every triangle that touches the
+    image rectangle [0, W] x [0, H] at all (sub-pixel samples, exact coverage).
+    """
     near, far, W, H = camera.near, camera.far, camera.width, camera.height
     K = camera.K.detach().to(torch.float64)
     F = faces.shape[0]
@@ -364,8 +369,8 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces) -> _ScreenTriang
     xy = xy.gather(1, order[:, :, None].expand(-1, -1, 2))
     q = q.gather(1, order)
     x, y = xy[..., 0], xy[..., 1]
-    good = (area != 0) & (_max3(x) >= 0.5) & (_min3(x) <= W - 0.5)          # zero area: covers nothing
-    good &= (_max3(y) >= 0.5) & (_min3(y) <= H - 0.5)
+    good = (area != 0) & (_max3(x) >= reach) & (_min3(x) <= W - reach)      # zero area: covers nothing
+    good &= (_max3(y) >= reach) & (_min3(y) <= H - reach)
     crosses_far = bool((z_max[keep] > far).any())
     if bool(good.all()):
         return _ScreenTriangles(xy, q, face, crosses_far)
@@ -502,6 +507,125 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
     return _faces_of(zbuf)
 
 
+# ------------------------------------------- stage 2, sub-pixel samples: the pixels a triangle touches
+
+def pixel_triangle_pairs(xy, width: int, height: int, mask=None):
+    """Every (pixel, triangle) pair whose closed pixel square and triangle touch: conservative coverage.
+
+    xy: (T, 3, 2) screen triangles; width, height: the image; mask: None, or an (H*W,) bool tensor of the
+    pixels to consider (the others are never enumerated). Returns ``pixel`` (N,) flat pixel indices
+    (row-major) and ``tri`` (N,) indices into xy, grouped by triangle.
+
+    Where ``rasterize`` asks whether a triangle covers a pixel's *centre*, this asks whether it touches the
+    pixel's *square* at all: a sliver between two centres, or a triangle smaller than a pixel, still shows
+    up. Row by row, the triangle is cut to the band ``[i, i+1]`` and the x-extent of that piece gives the
+    columns. The extents are widened by a few rounding errors, so a pair is never lost to rounding; a pair
+    that only touches a pixel's border (zero shared area) may be listed, which callers must tolerate.
+    """
+    xy = as_tensor(xy, dtype=torch.float64, name="xy")
+    device = xy.device
+    if xy.dim() != 3 or xy.shape[1:] != (3, 2):
+        raise ValueError(f"xy must have shape (T, 3, 2), got {tuple(xy.shape)}")
+    none = torch.zeros(0, dtype=torch.int64, device=device)
+    if xy.shape[0] == 0 or width <= 0 or height <= 0:
+        return none, none
+    slack = 1e-9 * (1 + xy.abs().amax((1, 2)))                              # (T,) a few rounding errors
+    y = xy[..., 1]
+    first = torch.floor(_min3(y) - slack).clamp(min=0)
+    last = (torch.ceil(_max3(y) + slack) - 1).clamp(max=height - 1)
+    tri_of_seg, seg_start = _expand((last - first + 1).clamp(min=0).long())
+    row = first.index_select(0, tri_of_seg) + (torch.arange(tri_of_seg.numel(), device=device)
+                                               - seg_start.index_select(0, tri_of_seg))   # (S,) band top
+    a = xy.index_select(0, tri_of_seg)                                      # (S, 3, 2) corners
+    b = a.roll(-1, 1)                                                       # edges a→b
+    lo, hi = row[:, None], row[:, None] + 1                                 # (S, 1) the band
+    dy = b[..., 1] - a[..., 1]
+    flat = dy == 0
+    t0 = (lo - a[..., 1]) / torch.where(flat, torch.ones_like(dy), dy)      # where the edge meets y = lo, hi
+    t1 = (hi - a[..., 1]) / torch.where(flat, torch.ones_like(dy), dy)
+    t_in = torch.minimum(t0, t1).clamp(min=0)                               # the part of the edge in the band
+    t_out = torch.maximum(t0, t1).clamp(max=1)
+    in_band = (a[..., 1] >= lo) & (a[..., 1] <= hi)
+    t_in = torch.where(flat, torch.zeros_like(t_in), t_in)
+    t_out = torch.where(flat, torch.ones_like(t_out), t_out)
+    ok = torch.where(flat, in_band, t_in <= t_out)                          # (S, 3)
+    dx = b[..., 0] - a[..., 0]
+    x_in, x_out = a[..., 0] + t_in * dx, a[..., 0] + t_out * dx
+    inf = torch.full_like(x_in, float("inf"))
+    x_lo = torch.where(ok, torch.minimum(x_in, x_out), inf).amin(1)         # (S,)
+    x_hi = torch.where(ok, torch.maximum(x_in, x_out), -inf).amax(1)
+    pad = slack.index_select(0, tri_of_seg)
+    col0 = torch.floor(x_lo - pad).clamp(min=0)
+    col1 = torch.maximum(torch.ceil(x_hi + pad) - 1, col0 - 1).clamp(max=width - 1)
+    count = (col1 - col0 + 1).clamp(min=0).long()                           # empty where off the image
+    base = (row * width + col0).long()
+    if mask is not None:                                                    # skip segments with no wanted pixel
+        mask = torch.as_tensor(mask, device=device).reshape(-1).bool()
+        if mask.numel() != width * height:
+            raise ValueError(f"mask must have H*W = {width * height} entries, got {mask.numel()}")
+        cum = torch.cat([torch.zeros(1, dtype=torch.int64, device=device), torch.cumsum(mask.long(), 0)])
+        wanted = (cum.index_select(0, base + count) - cum.index_select(0, base)) > 0
+        count = count * wanted
+    seg_of_px, px_start = _expand(count)
+    pixel = base.index_select(0, seg_of_px) + (torch.arange(seg_of_px.numel(), device=device)
+                                                - px_start.index_select(0, seg_of_px))
+    tri = tri_of_seg.index_select(0, seg_of_px)
+    if mask is not None:
+        keep = mask.index_select(0, pixel).nonzero().squeeze(1)
+        pixel, tri = pixel.index_select(0, keep), tri.index_select(0, keep)
+    return pixel, tri
+
+
+def _sample_inside(xy, points):
+    """Top-left coverage of points by triangles with positive area. xy: (N, 3, 2); points: (N, S, 2).
+
+    The same edge functions and fill rule as ``inside_triangle``, so a sample on an edge shared by two
+    triangles is covered exactly once."""
+    inside = torch.ones(points.shape[:2], dtype=torch.bool, device=points.device)
+    for k in range(3):
+        a, b = xy[:, k, None, :], xy[:, (k + 1) % 3, None, :]              # (N, 1, 2)
+        e = edge_function(a, b, points)                                     # (N, S)
+        inside &= (e > 0) | ((e == 0) & _is_top_left(a, b))
+    return inside
+
+
+def _sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets, budget=CHUNK[1]) -> torch.Tensor:
+    """Stage 2 for sub-pixel samples: the nearest face at every sample of the listed pixels.
+
+    pixels: (P,) flat pixel indices; offsets: (S, 2) the same for every pixel, or (P, S, 2) one set per
+    pixel, each from the pixel's top-left corner. Returns (P, S) int64 face ids, -1 where none. A sample's
+    answer depends only on its own position, never on which other pixels or samples are asked for, so a
+    subset of pixels gets bit-identical ids to the full image.
+    """
+    H, W = camera.height, camera.width
+    P, S = pixels.numel(), offsets.shape[-2]
+    device = st.xy.device
+    zbuf = torch.full((P * S,), EMPTY_KEY, dtype=torch.int64, device=device)
+    if st.face.numel() == 0 or P == 0:
+        return torch.full((P, S), -1, dtype=torch.int64, device=device)
+    slot_of = torch.full((H * W,), -1, dtype=torch.int64, device=device)
+    slot_of[pixels] = torch.arange(P, device=device)
+    q0, qx, qy = _plane(st)
+    pixel, tri = pixel_triangle_pairs(st.xy, W, H, slot_of >= 0)
+    step = max(1, budget // S)
+    for lo in range(0, pixel.numel(), step):                                # bounded memory: step * S samples
+        pix, t = pixel[lo:lo + step], tri[lo:lo + step]
+        slot = slot_of.index_select(0, pix)
+        corner = torch.stack([pix % W, pix // W], 1).double()               # (N, 2) top-left corner
+        off = offsets[None] if offsets.dim() == 2 else offsets.index_select(0, slot)
+        points = corner[:, None, :] + off                                   # (N, S, 2)
+        inside = _sample_inside(st.xy.index_select(0, t), points)
+        n, s = inside.nonzero().unbind(1)
+        tn = t.index_select(0, n)
+        p = points[n, s]
+        q = q0.index_select(0, tn) + qx.index_select(0, tn) * p[:, 0] + qy.index_select(0, tn) * p[:, 1]
+        depth = q.float() if camera.orthographic else q.float().reciprocal_()
+        ok = depth <= camera.far
+        keys = _depth_keys(depth[ok], st.face.index_select(0, tn)[ok], positive=not camera.orthographic)
+        zbuf.scatter_reduce_(0, (slot.index_select(0, n) * S + s)[ok], keys, reduce="amin")
+    return _faces_of(zbuf).view(P, S)
+
+
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
 
 def _mat3(M, x):
@@ -536,10 +660,22 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     """
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     device = verts.device
-    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
     pix = (face_map >= 0).nonzero().squeeze(1)                              # (M,) covered pixels
-    face = face_map.index_select(0, pix)
-    if faces.shape[0] <= pix.numel():                                       # few faces: a table row for each
+    pix_d = pix.double()
+    row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
+    bary, depth = _surface_at(face_map.index_select(0, pix), pix_d - row * W + 0.5, row + 0.5,
+                              verts, faces, camera)
+    bary_img = torch.zeros(H * W, 3, dtype=dtype, device=device).index_put((pix,), bary)
+    depth_img = torch.full((H * W,), float("inf"), dtype=dtype, device=device).index_put((pix,), depth)
+    return bary_img.view(H, W, 3), depth_img.view(H, W)
+
+
+def _surface_at(face, x, y, verts, faces, camera):
+    """``_visible_surface`` at arbitrary screen points: face (M,) int64 (all >= 0) and the points' float64
+    image coordinates x, y (M,). Returns bary (M, 3) and depth (M,), differentiable."""
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
+    if faces.shape[0] <= face.numel():                                       # few faces: a table row for each
         used, row_of_face = None, face
     else:                                                                   # many: only faces some pixel sees
         seen = torch.bincount(face, minlength=faces.shape[0]) > 0
@@ -562,28 +698,24 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹
     const = rows[..., 2] * (1 - K[2, 2]) + c[..., 2]                        # (U, 3)
     coef = torch.cat([rows[..., 0], rows[..., 1], const], 1).index_select(0, row_of_face)   # (M, 9)
-    pix_d = pix.double()
-    row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
-    qx = (pix_d - row * W + 0.5).to(dtype)[:, None] - K[0, 2]               # (M, 1) pixel centre x - cx
-    qy = (row + 0.5).to(dtype)[:, None] - K[1, 2]                           # (M, 1) y - cy
+    qx = x.to(dtype)[:, None] - K[0, 2]                                     # (M, 1) point x - cx
+    qy = y.to(dtype)[:, None] - K[1, 2]                                     # (M, 1) y - cy
     w = coef[:, 0:3] * qx                                                   # (M, 3): w1, w2, Σw
     w += coef[:, 3:6] * qy                                                  # in place: one (M, 3) buffer
     w += coef[:, 6:9]
-    del coef, pix_d, row, qx, qy                                            # freed before the next buffers
+    del coef, qx, qy                                                        # freed before the next buffers
     tiny = torch.finfo(dtype).tiny ** 0.5
     s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
     b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
     bary = torch.stack([1 - b1 - b2, b1, b2], 1)                            # (M, 3)
     z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1).index_select(0, row_of_face)   # (M, 3) z0, e1_z, e2_z
     depth = z[:, 0] + b1 * z[:, 1] + b2 * z[:, 2]                           # z0 + b1 e1_z + b2 e2_z
-    bary_img = torch.zeros(H * W, 3, dtype=dtype, device=device).index_put((pix,), bary)
-    depth_img = torch.full((H * W,), float("inf"), dtype=dtype, device=device).index_put((pix,), depth)
-    return bary_img.view(H, W, 3), depth_img.view(H, W)
+    return bary, depth
 
 
 # --------------------------------------------------------------------------------------------- public API
 
-def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fragments:
+def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False, samples=None, pixels=None) -> Fragments:
     """Rasterize a triangle mesh: the visible face, perspective-correct barycentrics and depth per pixel.
 
     mesh: anything with ``verts`` (V, 3) world space and ``faces`` (F, 3) int64 (a ``course.mesh.Mesh``).
@@ -592,14 +724,80 @@ def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fragment
     Returns ``Fragments`` of shape (H, W). Coverage follows the top-left fill rule; ties in depth go to the
     lower face id. ``bary`` and ``depth`` are differentiable w.r.t. ``mesh.verts`` and the camera's K, R, t;
     the choice of visible face is not (lecture 08: why visibility is not differentiable).
+
+    Sub-pixel samples (lecture 05, supersampling): ``samples`` (S, 2) offsets from each pixel's top-left
+    corner, in [0, 1) (the same for every pixel), or (P, S, 2) one set per listed pixel; ``pixels`` None
+    (every pixel), an (H, W) bool mask or (P,) flat pixel indices (row-major). With either given, the
+    fragments have shape (P, S): row p is the p-th listed pixel (a mask lists its pixels in row-major
+    order), column s its sample s (``samples=None`` then means the pixel centre, S = 1). Coverage and
+    visibility of a sample depend on its position alone, so asking for a subset of pixels gives
+    bit-identical face ids to asking for all of them. (This path tests every sample against the triangles
+    touching its pixel; at the pixel centre it agrees with the scan-line path except within rounding of an
+    edge.)
     """
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
+    if samples is not None or pixels is not None:
+        pixels, offsets = _check_samples(samples, pixels, H, W, verts.device)
+        with torch.no_grad():
+            st = _screen_triangles(_camera_space(verts, camera), faces, camera, cull_backfaces, reach=0.0)
+            face_map = _sample_zbuffer(st, camera, pixels, offsets)         # (P, S)
+        return _sample_fragments(face_map, pixels, offsets, verts, faces, camera)
     with torch.no_grad():                                                   # discrete decisions: no graph
         st = _screen_triangles(_camera_space(verts, camera), faces, camera, cull_backfaces)
         face_map = _zbuffer(st, camera)                                     # (H*W,)
     bary, depth = _visible_surface(face_map, verts, faces, camera, H, W)
     return Fragments(face_map.view(H, W), bary, depth)
+
+
+def _check_samples(samples, pixels, H, W, device):
+    """Validate ``rasterize``'s sample arguments: (P,) int64 pixels and float64 offsets (S, 2) or (P, S, 2)."""
+    if pixels is None:
+        pixels = torch.arange(H * W, device=device)
+    else:
+        pixels = torch.as_tensor(pixels, device=device)
+        if pixels.dtype == torch.bool:
+            if tuple(pixels.shape) != (H, W):
+                raise ValueError(f"a pixel mask must have shape (H, W) = ({H}, {W}), got {tuple(pixels.shape)}")
+            pixels = pixels.reshape(-1).nonzero().squeeze(1)
+        elif pixels.dim() != 1 or pixels.dtype.is_floating_point:
+            raise ValueError(f"pixels must be an (H, W) bool mask or (P,) integer indices, got "
+                             f"{pixels.dtype} {tuple(pixels.shape)}")
+        pixels = pixels.long()
+        if pixels.numel() and (int(pixels.min()) < 0 or int(pixels.max()) >= H * W):
+            raise ValueError(f"pixel indices must lie in [0, {H * W}), got values in "
+                             f"[{int(pixels.min())}, {int(pixels.max())}]")
+        if pixels.numel() != torch.unique(pixels).numel():
+            raise ValueError("pixels lists a pixel more than once")
+    if samples is None:
+        offsets = torch.full((1, 2), 0.5, dtype=torch.float64, device=device)
+    else:
+        offsets = as_tensor(samples, dtype=torch.float64, device=device, name="samples")
+        shape_ok = (offsets.dim() == 2 or (offsets.dim() == 3 and offsets.shape[0] == pixels.numel()))
+        if not shape_ok or offsets.shape[-1] != 2 or offsets.shape[-2] == 0:
+            raise ValueError(f"samples must have shape (S, 2) or (P, S, 2) with P = {pixels.numel()} listed "
+                             f"pixels, got {tuple(offsets.shape)}")
+        if offsets.numel() and (not torch.isfinite(offsets).all() or offsets.min() < 0 or offsets.max() > 1):
+            raise ValueError("sample offsets must be finite and lie in [0, 1] (from the pixel's top-left corner)")
+    return pixels, offsets
+
+
+def _sample_fragments(face_map, pixels, offsets, verts, faces, camera) -> Fragments:
+    """Fragments (P, S) of the sample z-buffer: barycentrics and depth at every covered sample."""
+    P, S = face_map.shape
+    W = camera.width
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    flat = face_map.reshape(-1)
+    hit = (flat >= 0).nonzero().squeeze(1)                                  # (M,) covered samples
+    p, s = hit // S, hit % S
+    pix = pixels.index_select(0, p)
+    off = offsets[s] if offsets.dim() == 2 else offsets[p, s]               # (M, 2)
+    x = (pix % W).double() + off[:, 0]
+    y = (pix // W).double() + off[:, 1]
+    bary, depth = _surface_at(flat.index_select(0, hit), x, y, verts, faces, camera)
+    bary_img = torch.zeros(P * S, 3, dtype=dtype, device=verts.device).index_put((hit,), bary)
+    depth_img = torch.full((P * S,), float("inf"), dtype=dtype, device=verts.device).index_put((hit,), depth)
+    return Fragments(face_map, bary_img.view(P, S, 3), depth_img.view(P, S))
 
 
 def rasterize_naive(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fragments:

@@ -1,0 +1,355 @@
+"""Antialiasing (lecture 05): supersampling, adaptive supersampling, and the exact pixel integral.
+
+A pixel is not a point but a small square, and its colour should be the *average* of the image over that
+square (the box filter): ``I_ij = ∫∫_pixel I(x, y) dx dy``. One sample at the centre replaces the integral by
+a single point value, which is where jaggies, breaking slivers and flickering come from. Three cures, from
+cheap to exact::
+
+    supersample            k × k samples in every pixel, averaged    error ~ 1/k along edges, cost ~ k²
+    adaptive_supersample   k × k samples only where a discontinuity  the same samples where it matters,
+                           of the image crosses the pixel            one elsewhere
+    exact_coverage         the integral in closed form (coverage.py) the ground truth
+
+Every sampler here calls the one rasterizer, ``rasterize(mesh, camera, samples=..., pixels=...)``: a sample's
+visible face depends only on its own position, so the adaptive sampler's samples are bit-identical to the
+full supersampler's wherever it takes them.
+
+Where does an image of flat-coloured faces jump? Only along (a) silhouette edges (folds, where a front face
+meets a back face, and boundary edges), (b) edges between faces of different colour, (c) lines where two
+faces intersect, and (d) lines where the near or far plane cuts a face. ``discontinuity_pixels`` marks every
+pixel whose *square* (not just its centre) one of them touches, so a sliver that covers no pixel centre is
+still found. Everything else is covered by faces of one colour: one sample there is exact.
+"""
+from __future__ import annotations
+
+import torch
+
+from .camera import Camera
+from .raster import (Fragments, _camera_space, _check_inputs, _plane, _project, _screen_triangles, edge_function,
+                     pixel_triangle_pairs, rasterize)
+from .tensors import as_tensor
+
+__all__ = [
+    "regular_offsets", "jittered_offsets", "sample_fragments", "resolve", "flat_colors",
+    "supersample", "discontinuity_pixels", "adaptive_supersample", "exact_coverage",
+]
+
+
+# ----------------------------------------------------------------------------------- where the samples go
+
+def regular_offsets(k: int, *, dtype=torch.float64, device=None) -> torch.Tensor:
+    """(k², 2) the centres of a k × k grid in the unit pixel square, row by row: ``((a + ½)/k, (b + ½)/k)``
+    for column a and row b; sample ``s = b k + a``. The same offsets serve every pixel."""
+    k = _check_k(k)
+    a = torch.arange(k, dtype=dtype, device=device)
+    grid = torch.stack(torch.meshgrid(a, a, indexing="xy"), -1).reshape(-1, 2)   # (k², 2) as (a, b)
+    return (grid + 0.5) / k
+
+
+def _hash32(x: torch.Tensor) -> torch.Tensor:
+    """A 32-bit integer hash (int64 tensors holding values < 2³²): shifts, xors and a multiplier small
+    enough that no product overflows int64, so every device computes the same bits."""
+    mask = 0xFFFFFFFF
+    x = ((x >> 16) ^ x) * 0x45D9F3B & mask
+    x = ((x >> 16) ^ x) * 0x45D9F3B & mask
+    return (x >> 16) ^ x
+
+
+def jittered_offsets(k: int, pixels, seed: int = 0, *, dtype=torch.float64) -> torch.Tensor:
+    """(P, k², 2) stratified jitter: sample (a, b) of a pixel lies uniformly at random in the cell
+    ``[a/k, (a+1)/k) × [b/k, (b+1)/k)``.
+
+    pixels: (P,) flat pixel indices. The random numbers are a hash of (seed, pixel, sample), not draws from
+    a generator, so a pixel's samples are the same whichever other pixels are sampled with it (the adaptive
+    sampler asks for a few pixels, the full one for all, and both get identical samples).
+    """
+    k = _check_k(k)
+    pixels = torch.as_tensor(pixels).long().reshape(-1)
+    s = torch.arange(k * k, device=pixels.device)
+    h = _hash32((_hash32(torch.full_like(pixels, int(seed) & 0xFFFFFFFF)) ^ pixels)[:, None])   # (P, 1)
+    u = _hash32(h ^ (2 * s)) >> 8                                           # (P, k²) 24 random bits each
+    v = _hash32(h ^ (2 * s + 1)) >> 8
+    jitter = torch.stack([u, v], -1).to(dtype) / 2.0**24                    # in [0, 1), exact in float32 too
+    return (regular_offsets(k, dtype=dtype, device=pixels.device) - 0.5 / k + jitter / k)
+
+
+def _check_k(k) -> int:
+    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+        raise ValueError(f"samples per axis k must be a positive int, got {k!r}")
+    return k
+
+
+def _pixel_list(pixels, camera) -> torch.Tensor:
+    H, W = camera.height, camera.width
+    if pixels is None:
+        return torch.arange(H * W, device=camera.K.device)
+    pixels = torch.as_tensor(pixels, device=camera.K.device)
+    return pixels.reshape(-1).nonzero().squeeze(1) if pixels.dtype == torch.bool else pixels.long()
+
+
+def sample_fragments(mesh, camera: Camera, k: int, *, jitter: bool = False, seed: int = 0, pixels=None,
+                     cull_backfaces: bool = False) -> Fragments:
+    """Rasterize k × k samples in each listed pixel: Fragments of shape (P, k²).
+
+    pixels: None (all H*W pixels, row-major), an (H, W) bool mask, or (P,) flat indices. jitter: stratified
+    jitter (``jittered_offsets``) instead of the regular grid.
+    """
+    pix = _pixel_list(pixels, camera)
+    offsets = jittered_offsets(k, pix, seed) if jitter else regular_offsets(_check_k(k))
+    return rasterize(mesh, camera, samples=offsets, pixels=pix, cull_backfaces=cull_backfaces)
+
+
+def resolve(values: torch.Tensor) -> torch.Tensor:
+    """The box filter: (P, S, C) sample values → (P, C) their mean.
+
+    The samples are added one after another in sample order and the sum divided by S, so a pixel's result
+    does not depend on how many other pixels are resolved with it (a vectorised ``mean`` may add in another
+    order for another shape, and the last bit would differ between the adaptive and the full sampler).
+    """
+    if values.dim() != 3 or values.shape[1] == 0:
+        raise ValueError(f"values must have shape (P, S, C) with S >= 1, got {tuple(values.shape)}")
+    total = values[:, 0]
+    for s in range(1, values.shape[1]):
+        total = total + values[:, s]
+    return total / values.shape[1]
+
+
+# ---------------------------------------------------------------------------------- flat-coloured images
+
+def _check_colors(face_colors, mesh, background):
+    colors = as_tensor(face_colors, name="face_colors")
+    if colors.dim() != 2 or colors.shape != (mesh.faces.shape[0], 3):
+        raise ValueError(f"face_colors must have shape (F, 3) = ({mesh.faces.shape[0]}, 3), "
+                         f"got {tuple(colors.shape)}")
+    if not torch.isfinite(colors).all():
+        raise ValueError("face_colors contains NaN or inf")
+    bg = as_tensor(background, dtype=colors.dtype, device=colors.device, name="background")
+    if bg.numel() != 3:
+        raise ValueError(f"background must be an RGB triple, got shape {tuple(bg.shape)}")
+    return colors, bg.reshape(3)
+
+
+def flat_colors(face_id: torch.Tensor, face_colors: torch.Tensor, background) -> torch.Tensor:
+    """The colour of every sample: face_id (...) → (..., 3), the face's colour or the background (-1)."""
+    colors = face_colors[face_id.clamp_min(0)]
+    return torch.where((face_id >= 0)[..., None], colors, background)
+
+
+def supersample(mesh, camera: Camera, face_colors, k: int, *, jitter: bool = False, seed: int = 0,
+                background=(0.0, 0.0, 0.0)) -> torch.Tensor:
+    """Flat-coloured faces, k × k samples per pixel, box-filtered: (H, W, 3).
+
+    face_colors: (F, 3); background: (3,) where no face is hit. Compare with ``exact_coverage``, the same
+    integral in closed form.
+    """
+    colors, bg = _check_colors(face_colors, mesh, background)
+    frags = sample_fragments(mesh, camera, k, jitter=jitter, seed=seed)
+    return resolve(flat_colors(frags.face_id, colors, bg)).view(camera.height, camera.width, 3)
+
+
+# ------------------------------------------------------------------------------------ where the image jumps
+
+def _weld(verts) -> torch.Tensor:
+    """(V,) one id per distinct vertex position: equal coordinates, equal id. Meshes often split vertices
+    for uvs or normals; two faces meeting along such a seam still share the edge geometrically."""
+    order = torch.arange(verts.shape[0], device=verts.device)
+    for c in (2, 1, 0):                                                      # lexicographic: stable sorts
+        order = order[torch.sort(verts[order, c], stable=True).indices]
+    v = verts[order]
+    new = torch.ones(v.shape[0], dtype=torch.bool, device=verts.device)
+    new[1:] = (v[1:] != v[:-1]).any(1)
+    weld = torch.empty_like(order)
+    weld[order] = torch.cumsum(new, 0) - 1
+    return weld
+
+
+def _pairs_within_groups(group: torch.Tensor):
+    """All pairs (i, j), i < j, of positions whose sorted ``group`` labels are equal. group: (N,) sorted."""
+    N = group.numel()
+    first = torch.ones(N, dtype=torch.bool, device=group.device)
+    first[1:] = group[1:] != group[:-1]
+    gid = torch.cumsum(first, 0) - 1
+    start = first.nonzero().squeeze(1)[gid]                                  # start of each one's group
+    size = torch.bincount(gid)[gid]
+    later = size - (torch.arange(N, device=group.device) - start) - 1        # partners after each element
+    i = torch.repeat_interleave(torch.arange(N, device=group.device), later)
+    step = torch.arange(i.numel(), device=group.device) - torch.repeat_interleave(torch.cumsum(later, 0) - later, later)
+    return i, i + 1 + step
+
+
+def _welded_edges(weld, faces):
+    """Edges of the welded mesh: for each face corner k (the edge k → k+1) an edge id, (F, 3)."""
+    w = weld[faces]                                                          # (F, 3)
+    a, b = w, w.roll(-1, 1)
+    n = int(weld.max()) + 1 if weld.numel() else 1
+    key = (torch.minimum(a, b) * n + torch.maximum(a, b)).reshape(-1)        # (3F,) one key per edge
+    _, edge_of = torch.unique(key, return_inverse=True)
+    return edge_of.view(-1, 3)
+
+
+def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
+    """(F,) bool: faces that may cross another face with which they share no vertex (in 3D, conservative).
+
+    Broad phase: a uniform grid of cells about one face wide; faces whose bounding boxes share a cell are
+    candidates. Narrow phase: the boxes overlap, and each face reaches both sides (or touches) the other's
+    plane. Faces of a closed, non-self-intersecting mesh fail it; the teapot's spout and body pass.
+    """
+    F = faces.shape[0]
+    hit = torch.zeros(F, dtype=torch.bool, device=faces.device)
+    if F < 2:
+        return hit
+    v = verts[faces]                                                         # (F, 3, 3)
+    lo, hi = v.amin(1), v.amax(1)
+    size = (hi - lo).amax(1).median().clamp_min(1e-12)                       # cell: a typical face
+    c_lo, c_hi = torch.floor(lo / size).long(), torch.floor(hi / size).long()
+    span = c_hi - c_lo + 1                                                   # (F, 3) cells per axis
+    count = span.prod(1)
+    face = torch.repeat_interleave(torch.arange(F, device=faces.device), count)
+    k = torch.arange(face.numel(), device=faces.device) - torch.repeat_interleave(torch.cumsum(count, 0) - count, count)
+    sx, sy = span[face, 0], span[face, 1]
+    cell = c_lo[face] + torch.stack([k % sx, (k // sx) % sy, k // (sx * sy)], 1)
+    cell = cell - cell.amin(0)
+    dims = cell.amax(0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    order = torch.argsort(key)
+    i, j = _pairs_within_groups(key[order])
+    f, g = face[order][i], face[order][j]
+    pair = torch.unique(torch.minimum(f, g) * F + torch.maximum(f, g))
+    f, g = pair // F, pair % F
+    shared = (weld[faces[f]][:, :, None] == weld[faces[g]][:, None, :]).flatten(1).any(1)
+    overlap = ((lo[f] <= hi[g]) & (lo[g] <= hi[f])).all(1)
+    f, g = f[overlap & ~shared & (f != g)], g[overlap & ~shared & (f != g)]
+    def straddles(a, b):                                                     # b's corners on both sides of a
+        n = torch.linalg.cross(v[a, 1] - v[a, 0], v[a, 2] - v[a, 0])
+        d = ((v[b] - v[a, 0][:, None]) * n[:, None]).sum(-1)                 # (N, 3)
+        tol = 1e-9 * n.norm(dim=1, keepdim=True) * (hi[b] - lo[b]).abs().amax(1, keepdim=True).clamp_min(1e-30)
+        return (d.amax(1) >= -tol[:, 0]) & (d.amin(1) <= tol[:, 0])
+    both = straddles(f, g) & straddles(g, f)
+    hit[f[both]] = True
+    hit[g[both]] = True
+    return hit
+
+
+def _discontinuous_edges(verts_cam, faces, weld, camera, keys, in_view, cull_backfaces):
+    """(F, 3) bool: the face edges along which the image may jump.
+
+    An edge between two faces is continuous only if exactly two faces share it, both are in view, they
+    have the same key (colour) and they lie on opposite sides of it on screen (no fold: both front-facing or
+    both back-facing). Anything else — a boundary, a fold (the silhouette), a colour change, a face that is
+    culled, edge-on or out of view, a non-manifold edge — is a possible discontinuity.
+    """
+    F = faces.shape[0]
+    edge_of = _welded_edges(weld, faces)
+    v = verts_cam[faces]                                                     # (F, 3, 3)
+    n = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    facing = torch.sign(n[:, 2]) if camera.orthographic else -torch.sign((n * v[:, 0]).sum(-1))   # +1 front
+    present = in_view & (facing != 0)
+    if cull_backfaces:
+        present &= facing > 0
+    E = int(edge_of.max()) + 1
+    flat_edge = edge_of.reshape(-1)                                          # (3F,)
+    face_of = torch.arange(F, device=faces.device).repeat_interleave(3)
+    live = present.repeat_interleave(3)
+    count = torch.zeros(E, dtype=torch.int64, device=faces.device).index_add_(0, flat_edge, live.long())
+    # with exactly two live faces per edge, min == max of key and facing means they agree
+    big = torch.iinfo(torch.int64).max
+    key_f, face_sign = keys[face_of], facing[face_of].long()
+    kmin = torch.full((E,), big, dtype=torch.int64, device=faces.device).scatter_reduce(
+        0, flat_edge[live], key_f[live], "amin")
+    kmax = torch.full((E,), -big, dtype=torch.int64, device=faces.device).scatter_reduce(
+        0, flat_edge[live], key_f[live], "amax")
+    smin = torch.full((E,), 2, dtype=torch.int64, device=faces.device).scatter_reduce(
+        0, flat_edge[live], face_sign[live], "amin")
+    smax = torch.full((E,), -2, dtype=torch.int64, device=faces.device).scatter_reduce(
+        0, flat_edge[live], face_sign[live], "amax")
+    smooth = (count == 2) & (kmin == kmax) & (smin == smax)
+    return ~smooth[edge_of]                                                  # (F, 3)
+
+
+def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces: bool = False) -> torch.Tensor:
+    """(H, W) bool: the pixels whose square a discontinuity of a flat-coloured image may cross.
+
+    face_keys: (F,) integers, faces with equal keys have equal colours (None: all equal, a silhouette;
+    use one key per distinct colour for flat colours). A pixel is marked when its square touches
+    (a) an edge where the image may jump (``_discontinuous_edges``: silhouettes and folds, boundaries, colour
+    changes), (b) any edge of a face cut by the near or the far plane (the cut itself is an edge), or (c) a
+    place where two faces sharing no vertex may intersect. The test is conservative: it may mark a pixel
+    where the jump turns out to be hidden, never miss one; so on an unmarked pixel all samples see one colour.
+    """
+    verts, faces = _check_inputs(mesh, camera)
+    H, W = camera.height, camera.width
+    F = faces.shape[0]
+    keys = torch.zeros(F, dtype=torch.int64, device=faces.device) if face_keys is None else \
+        torch.as_tensor(face_keys, device=faces.device).long().reshape(-1)
+    if keys.numel() != F:
+        raise ValueError(f"face_keys must have one entry per face ({F}), got {keys.numel()}")
+    marked = torch.zeros(H * W, dtype=torch.bool, device=faces.device)
+    with torch.no_grad():
+        verts_cam = _camera_space(verts, camera)
+        st = _screen_triangles(verts_cam, faces, camera, cull_backfaces, reach=0.0)
+        if st.face.numel() == 0:
+            return marked.view(H, W)
+        in_view = torch.zeros(F, dtype=torch.bool, device=faces.device)
+        in_view[st.face] = True
+        z = verts_cam[faces][..., 2]                                         # (F, 3)
+        cut = (z.amin(1) < camera.near) | (z.amax(1) > camera.far)           # (F,) faces a plane cuts
+        weld = _weld(verts.detach())
+        jump = _discontinuous_edges(verts_cam, faces, weld, camera, keys, in_view, cull_backfaces)   # (F, 3)
+        # the screen triangles' edges, each mapped to the face edge it lies on (st reorders corners)
+        xy = st.xy                                                           # (T, 3, 2)
+        whole = ~cut[st.face]
+        edge_jumps = torch.ones(st.face.numel(), 3, dtype=torch.bool, device=faces.device)
+        if whole.any():                                                      # clipped faces keep all edges
+            # an unclipped screen triangle is the face's corners in the order (0, 1, 2), or (0, 2, 1) where
+            # the face's screen area is negative; then its edges 0→2, 2→1, 1→0 are face edges 2, 1, 0
+            fw = st.face[whole]
+            v = _project_faces(verts_cam, faces[fw], camera)                 # (n, 3, 2) in face order
+            flipped = edge_function(v[:, 0], v[:, 1], v[:, 2]) < 0           # as _screen_triangles decides
+            j = jump[fw]
+            edge_jumps[whole] = torch.where(flipped[:, None], j[:, [2, 1, 0]], j)
+        segs_a = xy[edge_jumps.nonzero(as_tuple=True)]                       # (E, 2)
+        segs_b = xy.roll(-1, 1)[edge_jumps.nonzero(as_tuple=True)]
+        if segs_a.numel():
+            seg_tris = torch.stack([segs_a, segs_b, segs_b], 1)              # degenerate: the segment
+            pix, _ = pixel_triangle_pairs(seg_tris, W, H)
+            marked[pix] = True
+        crossing = _intersecting_faces(verts.detach().double(), faces, weld)[st.face]
+        if crossing.any():                                                   # all pixels such faces touch
+            pix, _ = pixel_triangle_pairs(xy[crossing], W, H)
+            marked[pix] = True
+    return marked.view(H, W)
+
+
+def _project_faces(verts_cam, face_verts, camera):
+    """Screen positions (n, 3, 2) of the faces' vertices, as ``_screen_triangles`` computes them."""
+    xy, _ = _project(verts_cam, camera, camera.K.detach().to(torch.float64))
+    return xy[face_verts]
+
+
+def _color_keys(colors: torch.Tensor) -> torch.Tensor:
+    """(F,) one integer per distinct colour."""
+    return torch.unique(colors.detach(), dim=0, return_inverse=True)[1]
+
+
+def adaptive_supersample(mesh, camera: Camera, face_colors, k: int, *, jitter: bool = False, seed: int = 0,
+                         background=(0.0, 0.0, 0.0)):
+    """Flat-coloured faces, k × k samples only in the pixels a discontinuity touches: (H, W, 3) and the
+    (H, W) bool mask of those pixels.
+
+    On marked pixels the samples are exactly those of ``supersample`` (same positions, same rasterizer), so
+    the face ids and the box-filter sums agree to the last bit. On the others every sample would see the
+    same colour, so one sample (the pixel centre) decides, and its colour is resolved as k² equal samples,
+    which again matches ``supersample`` bit for bit.
+    """
+    colors, bg = _check_colors(face_colors, mesh, background)
+    H, W = camera.height, camera.width
+    S = _check_k(k) ** 2
+    marked = discontinuity_pixels(mesh, camera, _color_keys(colors))
+    base = rasterize(mesh, camera)                                           # one sample per pixel
+    color = flat_colors(base.face_id.reshape(-1), colors, bg)                # (H*W, 3)
+    image = resolve(color[:, None, :].expand(-1, S, -1))                     # k² equal samples
+    pix = marked.reshape(-1).nonzero().squeeze(1)
+    if pix.numel():
+        frags = sample_fragments(mesh, camera, k, jitter=jitter, seed=seed, pixels=pix)
+        image = image.index_put((pix,), resolve(flat_colors(frags.face_id, colors, bg)))
+    return image.view(H, W, 3), marked
