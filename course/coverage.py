@@ -1,0 +1,569 @@
+"""Exact pixel coverage: the box-filtered image of flat-coloured faces, in closed form (lecture 05).
+
+A pixel (row i, column j) is the unit square [j, j+1] × [i, i+1]. Its exact (box-filtered) value is the
+integral of the visible colour over that square: ``Σ_f colour_f · area(visible part of f in the square)``
+plus the background times the uncovered area. Supersampling estimates that integral; here it is computed
+exactly, as a sum of polygon areas, and it is the ground truth every antialiasing method is compared with.
+
+The algorithm
+-------------
+1. **Which faces touch which pixels** (discrete, float64, no graph): raster's stage 1 clips every face at the
+   near plane and projects it (``_screen_triangles``); ``pixel_triangle_pairs`` lists every (pixel, triangle)
+   pair whose closed square and triangle touch. A face clipped into two triangles is listed once per pixel.
+2. **Each face on screen, differentiably**: its camera-space triangle is clipped at z = near (a triangle or
+   a quad) and projected; its *nearness* ``n(x, y) = A x + B y + C`` is affine on screen: n = 1/z for a
+   pinhole camera (a plane's 1/z is affine in the image coordinates), n = -z for an orthographic one. Larger
+   n is nearer. Polygons are reordered so their shoelace area is positive (``polygon_area``). This step runs
+   in float64 whatever the working dtype: it is one row per face (cheap), and float32 screen coordinates
+   hundreds of pixels from the origin would lose the digits that steps 4-5 need.
+3. **Skips**: a face that covers the whole pixel square (its edge lines hold at the 4 corners, and the far
+   plane does not cut it there) and is nearer than another face g at the 4 corners (n is affine, so the
+   corners decide) hides g in that pixel: g is dropped there. A pixel left with one face that covers it is
+   that face's colour (area 1, no clipping); a pixel left with one face needs no subtraction.
+4. **Visible pieces**: per (pixel, face f) the piece ``f ∩ square ∩ {z <= far}`` (Sutherland–Hodgman
+   clipping, ``clip_polygon``), minus, for every other face g of the pixel, the convex region
+   ``D = g ∩ {n_g > n_f} ∩ {z_g <= far}``: g's 3 or 4 edge half-planes, one depth half-plane and maybe one
+   far half-plane, H1..Hk. A convex piece minus D is the disjoint union of convex pieces
+   ``(piece ∩ ¬H1) ∪ (piece ∩ H1 ∩ ¬H2) ∪ ... ∪ (piece ∩ H1 ∩ ... ∩ ¬Hk)``; empty ones are dropped. The
+   depth half-plane's border is where the planes of f and g cross in 3D, so faces that pass through each
+   other (the teapot's spout and body) and cyclic overlaps need no special case. When the two faces are
+   coplanar over the pixel there is no depth half-plane: the lower face id is in front (as ``rasterize``).
+   A piece skips g when g is farther at the 4 pixel corners, when their bounding boxes miss, or when a line
+   separates them (one of D's lines, or one of the piece's own edges against g's corners); it disappears
+   when it lies inside D. Faces are subtracted nearest first (at the pixel centre), which removes most of a
+   hidden piece early. The cost grows with Σ K² over pixels (K faces touching a pixel): cheap at ordinary
+   resolutions, slow when hundreds of faces share a pixel.
+5. **Areas** by the shoelace formula. Steps 4 and 5 work in coordinates relative to the pixel's top-left
+   corner (numbers below 1, where float32 keeps its digits), in the working dtype; then
+   ``exact_coverage = Σ area · colour + background · (1 - Σ area)``.
+
+Derivatives: everything in steps 2-5 is plain torch on the differentiable camera-space vertices, so autograd
+gives d image / d (verts, colours, K, R, t). The image is piecewise rational in those: smooth while the
+arrangement of lines is fixed, with kinks where it changes (a vertex crossing a pixel border, an edge-on
+face, two faces becoming coplanar). At a kink autograd returns the derivative of the arrangement that the
+code chose, a one-sided value; every division is guarded, so it is finite.
+
+Memory: the plan (steps 1 and 3) lists the whole image's (pixel, face) pairs: raster's
+``pixel_triangle_pairs`` needs about 150 bytes per pair while it runs (100 MB for 700k pairs, a 20k-face
+sphere at 512²), then 24 bytes per pair are kept. The pieces are then built in chunks of about ``CHUNK``
+pairs (whole pixels): about 0.5 KB per pair of a chunk, ≈ 8 MB at CHUNK = 2**14 (measured: 30 MB at 2**16).
+``exact_coverage`` adds each chunk into the image and lets it go, so without autograd that is its peak;
+``visible_regions`` returns every piece (about 150 bytes each). With autograd the graph keeps every
+chunk's tensors until backward, so memory then grows with the number of pieces in the image.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from . import raster
+from .camera import world_to_camera
+from .tensors import as_tensor
+
+__all__ = ["exact_coverage", "visible_regions", "VisibleRegions", "clip_polygon", "polygon_area",
+           "halfplane_pixel_area", "CHUNK"]
+
+CHUNK = 1 << 14          # (pixel, face) pairs per chunk of work; bounds the working memory (module docstring)
+
+
+@dataclass(frozen=True)
+class VisibleRegions:
+    """The visible part of every face in every pixel, as convex pieces (N of them, at most M vertices).
+
+    pixel: (N,) int64 flat pixel index (row-major: row = pixel // W, column = pixel % W).
+    face:  (N,) int64 face id.
+    verts: (N, M, 2) the piece's vertices relative to its pixel's top-left corner (column, row), positive
+           shoelace orientation; slots past ``count`` repeat the last vertex (so they add no area). Differentiable.
+    count: (N,) int64 number of vertices.
+    area:  (N,) area of the piece in pixels (the unit square has area 1). Differentiable.
+    A face may have several pieces in one pixel; pieces of one pixel never overlap.
+    """
+    pixel: torch.Tensor
+    face: torch.Tensor
+    verts: torch.Tensor
+    count: torch.Tensor
+    area: torch.Tensor
+
+    def image_verts(self, width: int) -> torch.Tensor:
+        """(N, M, 2) the vertices in image coordinates (x right, y down)."""
+        corner = torch.stack([self.pixel % width, self.pixel // width], -1).to(self.verts.dtype)
+        return self.verts + corner[:, None, :]
+
+
+# ------------------------------------------------------------------------- the lecture's building blocks
+
+def clip_polygon(poly, line) -> torch.Tensor:
+    """One Sutherland–Hodgman step: the part of a convex polygon where ``a x + b y + c >= 0``.
+
+    poly: (N, 2) vertices in order; line: (3,) the coefficients (a, b, c). Returns (M, 2), M <= N + 1, the
+    clipped polygon in the same cyclic order (M = 0 when nothing is left). Walk each edge p → q: keep p when
+    it is inside, and add the crossing ``p + s_p / (s_p - s_q) (q - p)`` when p and q lie on different sides
+    (s = a x + b y + c; the denominator is nonzero exactly then). Differentiable.
+    """
+    poly = as_tensor(poly, name="poly")
+    line = as_tensor(line, dtype=poly.dtype, device=poly.device, name="line")
+    if poly.dim() != 2 or poly.shape[1] != 2 or line.shape != (3,):
+        raise ValueError(f"expected poly (N, 2) and line (3,), got {tuple(poly.shape)} and {tuple(line.shape)}")
+    s = poly[:, 0] * line[0] + poly[:, 1] * line[1] + line[2]              # (N,) signed value per vertex
+    out = []
+    for k in range(poly.shape[0]):
+        nxt = (k + 1) % poly.shape[0]
+        if s[k] >= 0:
+            out.append(poly[k])
+        if (s[k] >= 0) != (s[nxt] >= 0):                                   # the edge crosses the line
+            out.append(poly[k] + s[k] / (s[k] - s[nxt]) * (poly[nxt] - poly[k]))
+    return torch.stack(out) if out else poly.new_zeros((0, 2))
+
+
+def polygon_area(poly) -> torch.Tensor:
+    """Signed area of a polygon by the shoelace formula, ``½ Σ (x_k y_k+1 - x_k+1 y_k)``.
+
+    poly: (N, 2) in image coordinates (x right, y down). Returns a scalar tensor, positive when the vertices
+    run *clockwise as seen on screen* (e.g. (0,0) → (1,0) → (1,1): right, then down), negative when they
+    run counter-clockwise on screen, as a front face's do. Coordinates are taken relative to the first
+    vertex, so a small polygon far from the origin keeps its digits. Differentiable.
+    """
+    poly = as_tensor(poly, name="poly")
+    if poly.dim() != 2 or poly.shape[1] != 2:
+        raise ValueError(f"poly must have shape (N, 2), got {tuple(poly.shape)}")
+    if poly.shape[0] < 3:
+        return poly.new_zeros(())
+    p = poly - poly[0]
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * (x * y.roll(-1) - x.roll(-1) * y).sum()
+
+
+def halfplane_pixel_area(line, col, row) -> torch.Tensor:
+    """Area of pixel (row, col)'s unit square [col, col+1] × [row, row+1] on the side ``a x + b y + c >= 0``.
+
+    line: (3,) (a, b, c) in image coordinates; col, row: integers. Returns a scalar in [0, 1]: the coverage
+    of that pixel by a half-plane, the building block of analytic antialiasing (one clip, one area).
+    """
+    line = as_tensor(line, name="line")
+    if line.shape != (3,):
+        raise ValueError(f"line must have shape (3,), got {tuple(line.shape)}")
+    a, b, c = line.unbind(0)
+    local = torch.stack([a, b, c + a * col + b * row])                     # the same line, pixel-relative
+    square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=line.dtype, device=line.device)
+    return polygon_area(clip_polygon(square, local))
+
+
+# ---------------------------------------------------------------- the same steps, on padded batches
+
+def _take(x, idx):
+    """Rows of a batch of point lists: x (N, M, D), idx (N, K) → (N, K, D)."""
+    return x.gather(1, idx[..., None].expand(-1, -1, x.shape[-1]))
+
+
+def _pad(poly, width):
+    """(N, M, D) → (N, width, D), width >= M, repeating the last slot (padding adds no area)."""
+    extra = width - poly.shape[1]
+    return poly if extra <= 0 else torch.cat([poly, poly[:, -1:].expand(-1, extra, -1)], 1)
+
+
+def _clip_rows(poly, count, s, inside=None):
+    """``clip_polygon`` on N padded convex polygons at once, keeping the part where s >= 0.
+
+    poly: (N, M, D) points (D = 2 on screen, 3 in camera space), slots past count repeating the last vertex;
+    count: (N,); s: (N, M) the value at each vertex of a function affine along the edges; inside: optional
+    (N, M) bool decisions to use instead of ``s >= 0``. Returns (N, M', D) and the new counts (N,).
+    Every vertex emits itself (if inside) and its edge's crossing (if the edge changes side); a cumulative sum
+    gives each emitted point its output slot.
+    """
+    N, M, D = poly.shape
+    k = torch.arange(M, device=poly.device)
+    real = k < count[:, None]                                               # (N, M)
+    nxt = torch.where(k + 1 < count[:, None], k + 1, 0)                     # the edge k → nxt, cyclic
+    ins = s >= 0 if inside is None else inside
+    keep = real & ins
+    cross = real & (ins != ins.gather(1, nxt))
+    denom = s - s.gather(1, nxt)
+    denom = torch.where(cross & (denom != 0), denom, torch.ones_like(denom))   # guarded: no 0/0, even unused
+    t = torch.where(cross, s / denom, torch.zeros_like(s)).clamp(0, 1)
+    hit = poly + t[..., None] * (_take(poly, nxt) - poly)                   # (N, M, D) crossings
+    cand = torch.stack([poly, hit], 2).reshape(N, 2 * M, D)
+    emit = torch.stack([keep, cross], 2).reshape(N, 2 * M)
+    new_count = emit.sum(1)
+    width = max(int(new_count.max()), 1) if N else 1
+    slot = torch.where(emit, emit.cumsum(1) - 1, width)                     # unused candidates → a spare slot
+    src = torch.zeros(N, width + 1, dtype=torch.int64, device=poly.device)
+    src.scatter_(1, slot, torch.arange(2 * M, device=poly.device).expand(N, -1))
+    last = torch.minimum(torch.arange(width, device=poly.device), (new_count - 1).clamp(min=0)[:, None])
+    return _take(cand, src.gather(1, last)), new_count
+
+
+def _areas(poly):
+    """Shoelace areas of padded polygons (N, M, 2) → (N,)."""
+    x, y = poly[..., 0], poly[..., 1]
+    return 0.5 * (x * y.roll(-1, 1) - x.roll(-1, 1) * y).sum(1)
+
+
+def _edge_lines(poly):
+    """(N, M, 2) polygons → (N, M, 3) the line of each edge k → k+1, ``cross(q - p, x - p) >= 0`` inside
+    (the interior of a positively oriented polygon)."""
+    p, q = poly, poly.roll(-1, 1)
+    d = q - p
+    return torch.stack([-d[..., 1], d[..., 0], d[..., 1] * p[..., 0] - d[..., 0] * p[..., 1]], -1)
+
+
+def _values(lines, pts):
+    """Lines (N, L, 3) evaluated at points (N, M, 2) → (N, L, M)."""
+    return (lines[..., 0:1] * pts[:, None, :, 0] + lines[..., 1:2] * pts[:, None, :, 1]) + lines[..., 2:3]
+
+
+def _local(coef, corner):
+    """An affine function A x + B y + C (N, 3) in the coordinates relative to corner (N, 2)."""
+    c = coef[:, 2] + coef[:, 0] * corner[:, 0] + coef[:, 1] * corner[:, 1]
+    return torch.stack([coef[:, 0], coef[:, 1], c], -1)
+
+
+# ------------------------------------------------------------------------------- faces on screen
+
+@dataclass
+class _Faces:
+    """The used faces on screen: xy (U, 4, 2) polygon (padded), count (U,), coef (U, 3) nearness A, B, C."""
+    xy: torch.Tensor
+    count: torch.Tensor
+    coef: torch.Tensor
+
+
+def _safe(x):
+    """x with values too close to 0 replaced by ±sqrt(tiny): a finite quotient for edge-on faces."""
+    tiny = torch.finfo(x.dtype).tiny ** 0.5
+    return torch.where(x.abs() < tiny, torch.where(x < 0, -tiny, tiny), x)
+
+
+def _face_geometry(verts_cam, faces, camera, K, inside, flip) -> _Faces:
+    """Near-clipped screen polygons and nearness planes of faces (U, 3), in verts_cam's dtype.
+
+    inside: (U, 3) bool, which corners are in front of the near plane (decided once, in float64, so both
+    precisions clip alike); flip: (U,) bool, reverse the order (so every polygon has positive area).
+    """
+    v = verts_cam[faces]                                                    # (U, 3, 3)
+    v = torch.where(flip[:, None, None], v[:, [0, 2, 1]], v)
+    inside = torch.where(flip[:, None], inside[:, [0, 2, 1]], inside)
+    three = torch.full((v.shape[0],), 3, dtype=torch.int64, device=v.device)
+    poly, count = _clip_rows(v, three, v[..., 2] - camera.near, inside)    # (U, <=4, 3) camera space
+    poly = _pad(poly, 4)
+    z = poly[..., 2:]
+    if camera.orthographic:
+        xy1 = torch.cat([poly[..., :2], torch.ones_like(z)], -1)
+    else:
+        xy1 = poly / torch.where(z > 0, z, torch.ones_like(z))              # z >= near > 0 where used
+    xy = (xy1 @ K.T)[..., :2]                                               # (U, 4, 2) pixels
+    # the plane N · X = d through the face; a pixel p = (x, y, 1) sees X = z K⁻¹ p (pinhole) or (K⁻¹ p)_xy + z e3
+    normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])      # (U, 3)
+    d = (normal * v[:, 0]).sum(-1)
+    Kinv = torch.linalg.inv(K)
+    if camera.orthographic:                                                 # n = -z = (N_x X + N_y Y - d) / N_z
+        e3 = torch.tensor([0.0, 0.0, 1.0], dtype=K.dtype, device=K.device)
+        coef = (normal[:, :1] * Kinv[0] + normal[:, 1:2] * Kinv[1] - d[:, None] * e3) / _safe(normal[:, 2:])
+    else:                                                                   # n = 1/z = (N K⁻¹ p) / d
+        coef = (normal @ Kinv) / _safe(d)[:, None]
+    return _Faces(xy, count, coef)
+
+
+def _far_value(camera):
+    """The nearness of the far plane: z <= far ⇔ n >= this."""
+    return -camera.far if camera.orthographic else 1.0 / camera.far
+
+
+# ------------------------------------------------------------------- step 1 and 3: the plan (float64)
+
+@dataclass
+class _Plan:
+    """What the discrete, float64 part decides (no graph). U used faces, R pairs needing pieces."""
+    used: torch.Tensor        # (U,) face ids
+    inside: torch.Tensor      # (U, 3) corners in front of the near plane
+    flip: torch.Tensor        # (U,) reverse the corner order
+    geo: _Faces               # float64 geometry of the used faces (oriented)
+    edge_ok: torch.Tensor     # (U, 4) the polygon edge has nonzero length
+    far: torch.Tensor         # (U,) the face reaches beyond the far plane
+    lo: torch.Tensor          # (U, 2) bounding box of the screen polygon
+    hi: torch.Tensor          # (U, 2)
+    pixel: torch.Tensor       # (R,) pairs needing pieces, by pixel, nearest face first
+    face: torch.Tensor        # (R,) local face index
+    size: torch.Tensor        # (R,) number of faces kept in the pair's pixel
+    full_pixel: torch.Tensor  # pixels a single face covers entirely
+    full_face: torch.Tensor   # (local index of) that face
+
+
+def _corners(pixel, W):
+    """(R,) flat pixels → (R, 4, 2) the corners of their squares in image coordinates."""
+    col, row = (pixel % W).double(), (pixel // W).double()
+    dx = torch.tensor([0.0, 1.0, 1.0, 0.0], dtype=torch.float64, device=pixel.device)
+    dy = torch.tensor([0.0, 0.0, 1.0, 1.0], dtype=torch.float64, device=pixel.device)
+    return torch.stack([col[:, None] + dx, row[:, None] + dy], -1)
+
+
+def _nearness(coef, pts):
+    """coef (R, 3) at points (R, K, 2) → the value (R, K) and a scale for its rounding (R, K)."""
+    terms = coef[:, None, :2] * pts
+    return terms.sum(-1) + coef[:, None, 2], terms.abs().sum(-1) + coef[:, None, 2].abs()
+
+
+def _coplanar(n_a, s_a, n_b, s_b):
+    """Two faces' nearness agrees at the 4 corners to rounding: treat them as one plane (tie → lower id)."""
+    return ((n_a - n_b).abs() <= 1e-9 * (s_a + s_b)).all(-1)
+
+
+def _groups(pixel):
+    """For pairs sorted by pixel (R,): the first pair of each one's pixel and the pixel's pair count (R,)."""
+    _, counts = torch.unique_consecutive(pixel, return_counts=True)
+    start = torch.cumsum(counts, 0) - counts
+    return torch.repeat_interleave(start, counts), torch.repeat_interleave(counts, counts)
+
+
+def _pixel_chunks(pixel, size):
+    """(lo, hi) ranges of pairs sorted by pixel (R,): about ``size`` pairs each, never splitting a pixel."""
+    lo, R = 0, pixel.numel()
+    while lo < R:
+        hi = min(lo + size, R)
+        while hi < R and pixel[hi] == pixel[hi - 1]:
+            hi += 1
+        yield lo, hi
+        lo = hi
+
+
+def _plan(verts, faces, camera) -> _Plan:
+    H, W, F = camera.height, camera.width, faces.shape[0]
+    vc = raster._camera_space(verts, camera)                                # (V, 3) float64, detached
+    st = raster._screen_triangles(vc, faces, camera, False, reach=0.0)
+    pixel, tri = raster.pixel_triangle_pairs(st.xy, W, H)
+    key = torch.unique(pixel * F + st.face.index_select(0, tri))            # one entry per (pixel, face)
+    del pixel, tri
+    pixel, face_id = key // F, key % F
+    used, face = torch.unique(face_id, return_inverse=True)
+    K = camera.K.detach().double()
+    inside = vc[faces[used]][..., 2] >= camera.near
+    no_flip = torch.zeros_like(used, dtype=torch.bool)
+    flip = _areas(_face_geometry(vc, faces[used], camera, K, inside, no_flip).xy) < 0
+    geo = _face_geometry(vc, faces[used], camera, K, inside, flip)
+    d = geo.xy.roll(-1, 1) - geo.xy
+    edge_ok = d.abs().amax(-1) > 1e-12 * (1 + geo.xy.abs().amax(-1))
+    far = vc[faces[used]][..., 2].amax(-1) > camera.far
+    kept = [_hide(pixel[lo:hi], face[lo:hi], face_id[lo:hi], geo, edge_ok, far, camera)
+            for lo, hi in _pixel_chunks(pixel, 4 * CHUNK)]
+    pixel, face, covers = (torch.cat(x) for x in zip(*kept)) if kept else (pixel, face, face > 0)
+    _, size = _groups(pixel)
+    full = (size == 1) & covers
+    rest = ~full
+    return _Plan(used, inside, flip, geo, edge_ok, far, geo.xy.amin(1), geo.xy.amax(1), pixel[rest], face[rest],
+                 size[rest], pixel[full], face[full])
+
+
+def _hide(pixel, face, face_id, geo, edge_ok, far, camera):
+    """Step 3 on pairs of whole pixels: order each pixel's faces nearest first (at its centre) and drop the
+    faces that a face covering the whole square hides. Returns the kept pixel, face and covers (R',)."""
+    corner = _corners(pixel, camera.width)                                  # (R, 4, 2)
+    lines = _edge_lines(geo.xy).index_select(0, face)                       # (R, 4, 3)
+    covers = ((_values(lines, corner) >= 0) | ~edge_ok[face][..., None]).all(-1).all(-1)
+    n, scale = _nearness(geo.coef.index_select(0, face), corner)            # (R, 4)
+    covers &= (geo.count[face] >= 3) & (~far[face] | (n >= _far_value(camera)).all(-1))
+    n_centre = _nearness(geo.coef.index_select(0, face), corner.mean(1, keepdim=True))[0][:, 0]
+    order = torch.argsort(-n_centre, stable=True)
+    order = order[torch.argsort(pixel[order], stable=True)]
+    pixel, face, face_id, covers, n, scale = (x[order] for x in (pixel, face, face_id, covers, n, scale))
+    start, size = _groups(pixel)
+    reps = size * covers                                                    # each covering a meets its pixel
+    a = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), reps)
+    first = torch.repeat_interleave(torch.cumsum(reps, 0) - reps, reps)   # where each a's run begins
+    b = start[a] + torch.arange(a.numel(), device=a.device) - first
+    cop = _coplanar(n[a], scale[a], n[b], scale[b])
+    hides = (a != b) & torch.where(cop, face_id[a] < face_id[b], (n[a] > n[b]).all(-1))
+    kept = torch.ones_like(covers).index_put((b[hides],), torch.tensor(False, device=b.device))
+    return pixel[kept], face[kept], covers[kept]
+
+
+# ------------------------------------------------------------------- step 4: pieces, differentiably
+
+TRUE = (0.0, 0.0, 1.0)   # a line that holds everywhere: a half-plane that is not there
+
+
+def _square_piece(geo, plan, pixel, face, camera, dtype):
+    """Each pair's piece f ∩ square ∩ {z <= far}, pixel-relative: (R, M, 2), counts (R,)."""
+    W = camera.width
+    corner = torch.stack([pixel % W, pixel // W], -1).to(geo.xy.dtype)      # (R, 2)
+    poly, count = (geo.xy[face] - corner[:, None]).to(dtype), geo.count[face]   # pixel-relative, then dtype
+    for axis, sign in ((0, 1), (0, -1), (1, 1), (1, -1)):                   # u >= 0, u <= 1, v >= 0, v <= 1
+        u = poly[..., axis]
+        poly, count = _clip_rows(poly, count, u if sign > 0 else 1 - u)
+    far = plan.far[face]
+    if bool(far.any()):
+        line = (_local(geo.coef[face], corner) - corner.new_tensor([0.0, 0.0, _far_value(camera)])).to(dtype)
+        s = _values(line[:, None], poly)[:, 0]
+        poly, count = _clip_rows(poly, count, torch.where(far[:, None], s, torch.ones_like(s)))
+    return poly, count, corner
+
+
+def _occluder_lines(geo, plan, f, g, corner, camera, cop, dtype):
+    """D = g ∩ {n_g > n_f} ∩ {z_g <= far} as 6 half-planes (rows, 6, 3), pixel-relative, in dtype; ``TRUE``
+    rows for the half-planes a face does not have (a triangle's 4th edge, the depth line when coplanar...)."""
+    true = torch.tensor(TRUE, dtype=geo.xy.dtype, device=geo.xy.device)
+    edges = _edge_lines(geo.xy[g] - corner[:, None])                        # (rows, 4, 3)
+    edges = torch.where(plan.edge_ok[g][..., None], edges, true)
+    depth = _local(geo.coef[g] - geo.coef[f], corner)                       # n_g - n_f > 0: g is nearer
+    depth = torch.where(cop[:, None], true, depth)
+    far = _local(geo.coef[g], corner) - true.new_tensor([0.0, 0.0, _far_value(camera)])
+    far = torch.where(plan.far[g][:, None], far, true)
+    return torch.cat([edges, depth[:, None], far[:, None]], 1).to(dtype)
+
+
+def _classify(poly, lines, g_poly, tol):
+    """Per row: does a line separate the piece from D (skip g), or does the piece lie inside D (drop it)?"""
+    norm = lines[..., :2].norm(dim=-1).clamp(min=torch.finfo(lines.dtype).tiny)   # TRUE: huge values
+    val = _values(lines, poly) / norm[..., None]                            # (rows, 6, M) distances
+    separated = (val.amax(-1) <= tol).any(-1)                               # one of D's lines
+    inside = (val.amin(-1) >= -tol).all(-1)
+    edges = _edge_lines(poly)                                               # or one of the piece's edges
+    length = edges[..., :2].norm(dim=-1)
+    gval = _values(edges, g_poly) / length.clamp(min=torch.finfo(lines.dtype).tiny)[..., None]
+    separated |= ((length > tol) & (gval.amax(-1) <= tol)).any(-1)
+    return separated, inside & ~separated
+
+
+def _subtract(poly, count, lines, tol):
+    """Convex pieces (rows, M, 2) minus the convex regions given by lines (rows, 6, 3): the disjoint pieces
+    piece ∩ ¬H1, piece ∩ H1 ∩ ¬H2, ... Returns pieces, counts and the row each came from."""
+    rows = torch.arange(poly.shape[0], device=poly.device)
+    out = []
+    for h in range(lines.shape[1]):
+        s = _values(lines[:, h:h + 1], poly)[:, 0]                          # (rows, M)
+        cut = ((s.detach() < 0) & (torch.arange(poly.shape[1], device=s.device) < count[:, None])).any(1)
+        if not bool(cut.any()):
+            continue                                                        # nothing outside Hh: no piece
+        i = cut.nonzero().squeeze(1)
+        o, oc = _clip_rows(poly[i], count[i], -s[i])                        # piece ∩ ¬Hh
+        out.append((o, oc, rows[i]))
+        c, cc = _clip_rows(poly[i], count[i], s[i])                         # continue with piece ∩ Hh
+        width = max(c.shape[1], poly.shape[1])
+        poly = _pad(poly, width).index_copy(0, i, _pad(c, width))
+        count = count.index_copy(0, i, cc)
+    return out
+
+
+def _keep(poly, count, owner, tol):
+    """Drop pieces with fewer than 3 vertices or no area."""
+    ok = ((count >= 3) & (_areas(poly).detach() > tol * tol)).nonzero().squeeze(1)
+    return poly[ok], count[ok], owner[ok]
+
+
+def _cat(parts):
+    width = max(p.shape[1] for p, _, _ in parts)
+    return (torch.cat([_pad(p, width) for p, _, _ in parts]), torch.cat([c for _, c, _ in parts]),
+            torch.cat([o for _, _, o in parts]))
+
+
+def _chunk_pieces(geo, plan, lo, hi, camera, dtype):
+    """The visible pieces of the pairs lo:hi of the plan (whole pixels). Returns poly, count, pair index."""
+    pixel, face, size = plan.pixel[lo:hi], plan.face[lo:hi], plan.size[lo:hi]
+    start = _groups(pixel)[0]
+    tol = max(1e-12, 16 * torch.finfo(dtype).eps)
+    poly, count, corner = _square_piece(geo, plan, pixel, face, camera, dtype)
+    poly, count, owner = _keep(poly, count, torch.arange(pixel.numel(), device=pixel.device), tol)
+    corner64 = _corners(pixel, camera.width)
+    n, scale = _nearness(plan.geo.coef[face], corner64)                     # (R, 4) at the pixel's corners
+    g_lo, g_hi = plan.lo[face] - corner64[:, 0], plan.hi[face] - corner64[:, 0]   # (R, 2) relative bbox
+    done = []                                                               # pieces whose pixel has no more faces
+    for j in range(int(size.max()) if size.numel() else 0):                # the j-th face of every pixel
+        live = j < size[owner]
+        if not bool(live.all()):
+            done.append((poly[~live], count[~live], owner[~live]))
+            poly, count, owner = poly[live], count[live], owner[live]
+        pos = start[owner] + j                                              # the pair (pixel, g)
+        i = (pos != owner).nonzero().squeeze(1)
+        a, b = owner[i], pos[i]
+        box = poly[i].detach()                                              # g misses the piece's bbox
+        skip = ((g_hi[b] < box.amin(1) - 1e-4) | (g_lo[b] > box.amax(1) + 1e-4)).any(-1)   # (a loose test)
+        cop = _coplanar(n[a], scale[a], n[b], scale[b])                     # or g is behind f everywhere
+        skip |= torch.where(cop, plan.used[face[b]] > plan.used[face[a]], (n[b] < n[a]).all(-1))
+        i, cop = i[~skip], cop[~skip]                                       # (coplanar: lower id in front)
+        if i.numel() == 0:
+            continue
+        f, g = face[owner], face[pos]
+        lines = _occluder_lines(geo, plan, f[i], g[i], corner[owner[i]], camera, cop, dtype)
+        g_poly = (geo.xy[g[i]] - corner[owner[i]][:, None]).to(dtype)
+        with torch.no_grad():
+            separated, inside = _classify(poly[i].detach(), lines.detach(), g_poly.detach(), tol)
+        same = torch.ones_like(owner, dtype=torch.bool)
+        same[i[~separated]] = False
+        parts = [(poly[same], count[same], owner[same])]                    # untouched by g
+        split = i[~separated & ~inside]                                     # (pieces inside D are gone)
+        for o, oc, r in _subtract(poly[split], count[split], lines[~separated & ~inside], tol):
+            parts.append(_keep(o, oc, owner[split][r], tol))
+        poly, count, owner = _cat(parts)
+    return _cat(done + [(poly, count, owner)])
+
+
+# ------------------------------------------------------------------------------------------ public API
+
+def _region_chunks(verts, faces, camera, dtype):
+    """The visible pieces chunk by chunk: one ``VisibleRegions`` for the pixels a single face covers, then
+    one per chunk of at most about ``CHUNK`` (pixel, face) pairs."""
+    with torch.no_grad():
+        plan = _plan(verts, faces, camera)
+    # per-face geometry in float64 (one row per face: cheap), the pieces in dtype once pixel-relative
+    verts_cam = world_to_camera(verts.double(), camera.R.double(), camera.t.double())   # (V, 3)
+    geo = _face_geometry(verts_cam, faces[plan.used], camera, camera.K.double(), plan.inside, plan.flip)
+    n_full = plan.full_pixel.numel()                                        # the unit square, area 1
+    square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype, device=verts.device)
+    yield VisibleRegions(plan.full_pixel, plan.used[plan.full_face], square.expand(n_full, 4, 2),
+                         torch.full_like(plan.full_pixel, 4), square.new_ones(n_full))
+    for lo, hi in _pixel_chunks(plan.pixel, CHUNK):                         # chunks of whole pixels
+        poly, count, owner = _chunk_pieces(geo, plan, lo, hi, camera, dtype)
+        yield VisibleRegions(plan.pixel[lo:hi][owner], plan.used[plan.face[lo:hi][owner]], poly, count,
+                             _areas(poly))
+
+
+def visible_regions(mesh, camera, *, dtype=None) -> VisibleRegions:
+    """The visible part of every face in every pixel, as convex polygons: the building block of
+    ``exact_coverage`` (module docstring: the algorithm).
+
+    mesh: ``verts`` (V, 3) world space, ``faces`` (F, 3); camera: a ``Camera`` (perspective or orthographic).
+    Semantics of ``rasterize`` without culling: back faces count, faces are clipped at the near plane and
+    the far plane, coplanar faces resolve to the lower face id, and depth is compared point by point (faces
+    may intersect or overlap cyclically). dtype: the working precision of the pieces (per-face geometry is
+    float64), default ``promote(verts, camera)``; float64 is the reference. Differentiable w.r.t. verts, K, R and t
+    (one-sided at kinks, where the arrangement of the pieces changes). Returns ``VisibleRegions``, whose
+    size grows with the image (``exact_coverage`` works chunk by chunk instead).
+    """
+    verts, faces = raster._check_inputs(mesh, camera)
+    dtype = dtype or torch.promote_types(verts.dtype, camera.dtype)
+    parts = list(_region_chunks(verts, faces, camera, dtype))
+    width = max(r.verts.shape[1] for r in parts)
+    return VisibleRegions(*(torch.cat([getattr(r, name) for r in parts]) for name in ("pixel", "face")),
+                          torch.cat([_pad(r.verts, width) for r in parts]),
+                          *(torch.cat([getattr(r, name) for r in parts]) for name in ("count", "area")))
+
+
+def exact_coverage(mesh, camera, face_colors, background=(0.0, 0.0, 0.0)) -> torch.Tensor:
+    """The exact box-filtered image of flat-coloured faces: each pixel the integral of the visible colour
+    over its unit square, background where nothing is visible.
+
+    mesh: ``verts`` (V, 3), ``faces`` (F, 3); camera: a ``Camera``; face_colors: (F, 3) one colour per face;
+    background: (3,). Returns (H, W, 3) in ``promote(verts, camera, face_colors)``. Same visibility as
+    ``rasterize`` without culling (``visible_regions``). Differentiable w.r.t. verts, face_colors, K, R and
+    t: the image is piecewise rational in them; where the arrangement changes (a vertex crossing a pixel
+    border, an edge-on face) autograd returns a one-sided derivative, always finite.
+    """
+    verts, faces = raster._check_inputs(mesh, camera)
+    colors = as_tensor(face_colors, device=verts.device, name="face_colors")
+    if colors.shape != (faces.shape[0], 3):
+        raise ValueError(f"face_colors must have shape (F, 3) = ({faces.shape[0]}, 3), got {tuple(colors.shape)}")
+    if not torch.isfinite(colors).all():
+        raise ValueError("face_colors contains NaN or inf")
+    dtype = torch.promote_types(torch.promote_types(verts.dtype, camera.dtype), colors.dtype)
+    bg = as_tensor(background, dtype=dtype, device=verts.device, name="background")
+    if bg.shape != (3,):
+        raise ValueError(f"background must have shape (3,), got {tuple(bg.shape)}")
+    if not torch.isfinite(bg).all():
+        raise ValueError("background contains NaN or inf")
+    H, W = camera.height, camera.width
+    colors = colors.to(dtype)
+    image = torch.zeros(H * W, 3, dtype=dtype, device=verts.device)
+    covered = torch.zeros(H * W, dtype=dtype, device=verts.device)
+    for regions in _region_chunks(verts, faces, camera, dtype):            # Σ area · colour, chunk by chunk
+        image = image.index_add(0, regions.pixel, regions.area[:, None] * colors[regions.face])
+        covered = covered.index_add(0, regions.pixel, regions.area)
+    return (image + (1 - covered)[:, None] * bg).view(H, W, 3)
