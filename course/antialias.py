@@ -25,13 +25,14 @@ from __future__ import annotations
 import torch
 
 from .camera import Camera
+from .coverage import exact_coverage
 from .raster import (Fragments, _camera_space, _check_inputs, _plane, _project, _screen_triangles, edge_function,
                      pixel_triangle_pairs, rasterize)
 from .tensors import as_tensor
 
 __all__ = [
     "regular_offsets", "jittered_offsets", "sample_fragments", "resolve", "flat_colors",
-    "supersample", "discontinuity_pixels", "adaptive_supersample", "exact_coverage",
+    "supersample", "segment_pixels", "discontinuity_pixels", "adaptive_supersample", "exact_coverage",
 ]
 
 
@@ -183,16 +184,39 @@ def _welded_edges(weld, faces):
     a, b = w, w.roll(-1, 1)
     n = int(weld.max()) + 1 if weld.numel() else 1
     key = (torch.minimum(a, b) * n + torch.maximum(a, b)).reshape(-1)        # (3F,) one key per edge
-    _, edge_of = torch.unique(key, return_inverse=True)
-    return edge_of.view(-1, 3)
+    return _dense_ids(key).view(-1, 3)
+
+
+def _dense_ids(key: torch.Tensor) -> torch.Tensor:
+    """Integer keys (N,) → ids 0..U-1, equal keys equal ids (``unique(return_inverse=True)``, by one sort)."""
+    sorted_key, order = torch.sort(key)
+    new = torch.ones_like(sorted_key, dtype=torch.bool)
+    new[1:] = sorted_key[1:] != sorted_key[:-1]
+    ids = torch.empty_like(order)
+    ids[order] = torch.cumsum(new, 0) - 1
+    return ids
+
+
+def _seam_edges(weld, faces) -> torch.Tensor:
+    """(F, 3) bool: face edges whose welded edge is also used, by another face, with other vertex indices."""
+    edge_of = _welded_edges(weld, faces).reshape(-1)                         # (3F,)
+    a, b = faces, faces.roll(-1, 1)
+    n = int(faces.max()) + 1                                                 # vertex count bound
+    raw = (torch.minimum(a, b) * n + torch.maximum(a, b)).reshape(-1)
+    E = int(edge_of.max()) + 1
+    big = torch.iinfo(torch.int64).max
+    lo = torch.full((E,), big, dtype=torch.int64, device=faces.device).scatter_reduce(0, edge_of, raw, "amin")
+    hi = torch.full((E,), -big, dtype=torch.int64, device=faces.device).scatter_reduce(0, edge_of, raw, "amax")
+    return (lo != hi)[edge_of].view(-1, 3)
 
 
 def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     """(F,) bool: faces that may cross another face with which they share no vertex (in 3D, conservative).
 
     Broad phase: a uniform grid of cells about one face wide; faces whose bounding boxes share a cell are
-    candidates. Narrow phase: the boxes overlap, and each face reaches both sides (or touches) the other's
-    plane. Faces of a closed, non-self-intersecting mesh fail it; the teapot's spout and body pass.
+    candidates. Narrow phase: the boxes overlap, and each face has corners strictly on both sides of the
+    other's plane (faces that only touch, or lie in one plane, draw no line across each other). Faces of a
+    closed, non-self-intersecting mesh fail it; the teapot's spout and body pass.
     """
     F = faces.shape[0]
     hit = torch.zeros(F, dtype=torch.bool, device=faces.device)
@@ -214,16 +238,17 @@ def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     order = torch.argsort(key)
     i, j = _pairs_within_groups(key[order])
     f, g = face[order][i], face[order][j]
-    pair = torch.unique(torch.minimum(f, g) * F + torch.maximum(f, g))
+    pair = torch.sort(torch.minimum(f, g) * F + torch.maximum(f, g)).values
+    pair = pair[torch.cat([pair.new_ones(min(1, pair.numel()), dtype=torch.bool), pair[1:] != pair[:-1]])]
     f, g = pair // F, pair % F
     shared = (weld[faces[f]][:, :, None] == weld[faces[g]][:, None, :]).flatten(1).any(1)
     overlap = ((lo[f] <= hi[g]) & (lo[g] <= hi[f])).all(1)
     f, g = f[overlap & ~shared & (f != g)], g[overlap & ~shared & (f != g)]
-    def straddles(a, b):                                                     # b's corners on both sides of a
+    def straddles(a, b):                                                     # b's corners strictly on both sides
         n = torch.linalg.cross(v[a, 1] - v[a, 0], v[a, 2] - v[a, 0])
         d = ((v[b] - v[a, 0][:, None]) * n[:, None]).sum(-1)                 # (N, 3)
-        tol = 1e-9 * n.norm(dim=1, keepdim=True) * (hi[b] - lo[b]).abs().amax(1, keepdim=True).clamp_min(1e-30)
-        return (d.amax(1) >= -tol[:, 0]) & (d.amin(1) <= tol[:, 0])
+        tol = 1e-9 * n.norm(dim=1) * (hi[b] - lo[b]).abs().amax(1)
+        return (d.amax(1) > tol) & (d.amin(1) < -tol)
     both = straddles(f, g) & straddles(g, f)
     hit[f[both]] = True
     hit[g[both]] = True
@@ -266,7 +291,8 @@ def _discontinuous_edges(verts_cam, faces, weld, camera, keys, in_view, cull_bac
     return ~smooth[edge_of]                                                  # (F, 3)
 
 
-def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces: bool = False) -> torch.Tensor:
+def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces: bool = False,
+                         seams: bool = False) -> torch.Tensor:
     """(H, W) bool: the pixels whose square a discontinuity of a flat-coloured image may cross.
 
     face_keys: (F,) integers, faces with equal keys have equal colours (None: all equal, a silhouette;
@@ -275,6 +301,8 @@ def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces
     changes), (b) any edge of a face cut by the near or the far plane (the cut itself is an edge), or (c) a
     place where two faces sharing no vertex may intersect. The test is conservative: it may mark a pixel
     where the jump turns out to be hidden, never miss one; so on an unmarked pixel all samples see one colour.
+    seams: also mark edges where the two faces meet at the same positions but different vertices (split for
+    uvs or normals): attributes interpolated from those vertices may jump there (shaded and textured images).
     """
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
@@ -295,6 +323,8 @@ def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces
         cut = (z.amin(1) < camera.near) | (z.amax(1) > camera.far)           # (F,) faces a plane cuts
         weld = _weld(verts.detach())
         jump = _discontinuous_edges(verts_cam, faces, weld, camera, keys, in_view, cull_backfaces)   # (F, 3)
+        if seams:
+            jump |= _seam_edges(weld, faces)
         # the screen triangles' edges, each mapped to the face edge it lies on (st reorders corners)
         xy = st.xy                                                           # (T, 3, 2)
         whole = ~cut[st.face]
@@ -318,6 +348,27 @@ def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces
             pix, _ = pixel_triangle_pairs(xy[crossing], W, H)
             marked[pix] = True
     return marked.view(H, W)
+
+
+def segment_pixels(a, b, width: int, height: int) -> torch.Tensor:
+    """(H, W) bool: the pixels whose closed square the segment a→b touches (its "supercover").
+
+    a, b: (2,) or (N, 2) endpoints in image coordinates (N segments, all marked in one mask). This is how
+    ``discontinuity_pixels`` marks an edge: every pixel the edge passes through, not only those whose
+    centre it passes near, so an edge that slips between two rows of pixel centres is still found.
+    """
+    a = as_tensor(a, dtype=torch.float64, name="a").reshape(-1, 2)
+    b = as_tensor(b, dtype=torch.float64, device=a.device, name="b").reshape(-1, 2)
+    if a.shape != b.shape:
+        raise ValueError(f"a and b must have the same shape (2,) or (N, 2), got {tuple(a.shape)} and {tuple(b.shape)}")
+    if not (torch.isfinite(a).all() and torch.isfinite(b).all()):
+        raise ValueError("segment endpoints must be finite")
+    if width < 1 or height < 1:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    mask = torch.zeros(height * width, dtype=torch.bool, device=a.device)
+    pix, _ = pixel_triangle_pairs(torch.stack([a, b, b], 1), width, height)   # a degenerate triangle
+    mask[pix] = True
+    return mask.view(height, width)
 
 
 def _project_faces(verts_cam, face_verts, camera):

@@ -555,10 +555,11 @@ def pixel_triangle_pairs(xy, width: int, height: int, mask=None):
     x_lo = torch.where(ok, torch.minimum(x_in, x_out), inf).amin(1)         # (S,)
     x_hi = torch.where(ok, torch.maximum(x_in, x_out), -inf).amax(1)
     pad = slack.index_select(0, tri_of_seg)
-    col0 = torch.floor(x_lo - pad).clamp(min=0)
-    col1 = torch.maximum(torch.ceil(x_hi + pad) - 1, col0 - 1).clamp(max=width - 1)
+    meets = torch.isfinite(x_lo)                                            # a band the slack added may be empty
+    col0 = torch.where(meets, torch.floor(x_lo - pad), torch.zeros_like(x_lo)).clamp(min=0)
+    col1 = torch.where(meets, torch.ceil(x_hi + pad) - 1, torch.full_like(x_hi, -1.0)).clamp(max=width - 1)
     count = (col1 - col0 + 1).clamp(min=0).long()                           # empty where off the image
-    base = (row * width + col0).long()
+    base = (row * width + col0.clamp(max=width - 1)).long()                 # (only empty segments move)
     if mask is not None:                                                    # skip segments with no wanted pixel
         mask = torch.as_tensor(mask, device=device).reshape(-1).bool()
         if mask.numel() != width * height:

@@ -3,7 +3,8 @@
 ::
 
     plan ─▶ join meshes ─▶ rasterize (cull) ─▶ base colour (texture / vertex colours / material)
-         ─▶ normals ─▶ lighting (flat | Gouraud | Phong) ─▶ wireframe ─▶ composite over the background
+         ─▶ normals ─▶ lighting (flat | Gouraud | Phong) ─▶ composite over the background
+         ─▶ antialias: detect edge pixels, shade k × k samples there (or everywhere), box-filter ─▶ wireframe
 
 Each stage runs only when the scene and settings need it: an unlit scene (or one without lights) computes
 no normals and no lighting; a mesh without a texture makes no UV lookups; when nothing requires a gradient
@@ -15,6 +16,12 @@ The degrees of realism of lecture 04 are one setting each: ``shading="wireframe"
 (visibility, one flat colour per mesh), ``"flat"``, ``"gouraud"`` / ``"phong"`` (smooth, Blinn-Phong
 highlights), and any of these on a textured mesh. ``"unlit"`` shows base colours; ``"depth"`` and
 ``"normals"`` visualise the G-buffer.
+
+Antialiasing (lecture 05) is a setting too: ``antialias="supersample"`` shades k × k samples in every pixel
+and box-filters them; ``"adaptive"`` does so only in the pixels a discontinuity touches (silhouettes,
+occlusion, intersections, material changes; every edge under flat shading), and skips the samples entirely
+when no pixel needs them. Textures are filtered by mipmaps (``texture_filter="trilinear"``), which
+supersampling alone does not replace.
 """
 from __future__ import annotations
 
@@ -30,8 +37,8 @@ from course.camera import Camera
 from course.mesh import Mesh
 from course.raster import Fragments, interpolate, rasterize
 from course.shading import (
-    AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, normalize,
-    phong_shading, sample_texture, wireframe_overlay,
+    AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, mip_pyramid, normalize,
+    phong_shading, sample_texture, sample_texture_mip, uv_derivatives, wireframe_overlay,
 )
 from course.tensors import as_tensor
 
@@ -42,6 +49,8 @@ SHADING_MODES = ("phong", "gouraud", "flat", "unlit", "silhouette", "wireframe",
 LIT_MODES = ("phong", "gouraud", "flat")
 COLOR_MODES = LIT_MODES + ("unlit",)                       # modes that show textures and vertex colours
 FORCEABLE = ("normals", "lighting", "texture", "autograd")
+ANTIALIAS_MODES = ("none", "supersample", "adaptive")
+TEXTURE_FILTERS = ("bilinear", "nearest", "trilinear")
 
 
 # -------------------------------------------------------------------------------------- scene and settings
@@ -103,11 +112,18 @@ def _materials_per_mesh(materials, n: int) -> tuple:
 class RenderSettings:
     """How to draw a scene.
 
-    shading: one of SHADING_MODES. texture_filter: ``"bilinear"`` or ``"nearest"``. textures: use mesh
+    shading: one of SHADING_MODES. texture_filter: ``"bilinear"``, ``"nearest"`` or ``"trilinear"`` (mipmapped,
+    the level from each pixel's exact uv footprint: no moiré where the texture is minified). textures: use mesh
     textures (False: vertex or material colours instead). wireframe: draw visible edges on top
     (``wireframe_width`` pixels, ``wireframe_color``). cull_backfaces: skip faces seen from behind
     (clockwise on screen). clamp: clip the image to [0, 1] (gradients vanish where it clips).
     return_depth / return_normals / return_silhouette: fill those fields of the result.
+    antialias: ``"none"`` (one sample at each pixel centre), ``"supersample"`` (``samples`` × ``samples``
+    per pixel everywhere) or ``"adaptive"`` (that many only in the pixels a discontinuity of the image
+    touches: silhouettes, occlusion, intersections, colour and material changes, seams; lecture 05).
+    jitter: stratified jittered samples instead of a regular grid, from a hash of (``seed``, pixel, sample).
+    With antialiasing the image and the silhouette are box-filtered (each sample clamped, then averaged);
+    depth and normals come from the pixel centres, and the wireframe is drawn over the filtered image.
     """
     shading: str = "phong"
     texture_filter: str = "bilinear"
@@ -120,14 +136,24 @@ class RenderSettings:
     return_depth: bool = False
     return_normals: bool = False
     return_silhouette: bool = False
+    antialias: str = "none"
+    samples: int = 4
+    jitter: bool = False
+    seed: int = 0
 
     def __post_init__(self):
         if self.shading not in SHADING_MODES:
             raise ValueError(f"unknown shading mode {self.shading!r}; choose one of {', '.join(SHADING_MODES)}")
-        if self.texture_filter not in ("bilinear", "nearest"):
-            raise ValueError(f"texture_filter must be 'bilinear' or 'nearest', got {self.texture_filter!r}")
+        if self.texture_filter not in TEXTURE_FILTERS:
+            raise ValueError(f"texture_filter must be one of {', '.join(map(repr, TEXTURE_FILTERS))}, "
+                             f"got {self.texture_filter!r}")
         if not self.wireframe_width > 0:
             raise ValueError(f"wireframe_width must be positive (pixels), got {self.wireframe_width}")
+        if self.antialias not in ANTIALIAS_MODES:
+            raise ValueError(f"antialias must be one of {', '.join(map(repr, ANTIALIAS_MODES))}, "
+                             f"got {self.antialias!r}")
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
+            raise ValueError(f"samples (per axis) must be a positive int, got {self.samples!r}")
 
 
 @dataclass(frozen=True)
@@ -175,6 +201,8 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
         "vertex_colors": mode in COLOR_MODES and any(m.vert_colors is not None for m in scene.meshes),
         "normals": lit or mode == "normals" or settings.return_normals,
         "lighting": lit,
+        "detect_edges": settings.antialias == "adaptive",                 # lecture 05: after shading the
+        "supersample": settings.antialias != "none",                      # centres, refine edge pixels
         "wireframe": settings.wireframe or mode == "wireframe",
         "autograd": _needs_grad(scene),
     }
@@ -212,9 +240,11 @@ def _per_vertex(meshes, attr: str, width: int, like: torch.Tensor) -> torch.Tens
     return torch.cat([as_tensor(r, dtype=like.dtype, device=like.device) for r in rows])
 
 
-def _base_color(scene, geo, frags, settings, passes):
+def _base_color(scene, geo, frags, settings, passes, spacing: float = 1.0):
     """Per-pixel colours (H, W, 3): the mesh's material colour, and the base colour (texture where the
-    mesh has one, else vertex colours, else the material colour) when those passes run."""
+    mesh has one, else vertex colours, else the material colour) when those passes run. spacing: the
+    distance between samples in pixels (1/k for k x k supersampling), which scales a sample's uv footprint
+    for the mip level: each sample should filter its own share of the pixel, not the whole pixel again."""
     like = geo.mesh.verts
     mesh_px = geo.face_mesh[frags.face_id.clamp_min(0)]                      # (H, W) mesh of each pixel
     table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
@@ -225,11 +255,20 @@ def _base_color(scene, geo, frags, settings, passes):
         colors = interpolate(_per_vertex(scene.meshes, "vert_colors", 3, like), frags, geo.mesh.faces)
         base = torch.where(has[mesh_px][..., None], colors, base)
     if "texture" in passes:
-        uv = interpolate(_per_vertex(scene.meshes, "uvs", 2, like), frags, geo.mesh.faces)   # (H, W, 2)
+        uvs = _per_vertex(scene.meshes, "uvs", 2, like)                      # (V, 2)
+        uv = interpolate(uvs, frags, geo.mesh.faces)                         # (H, W, 2)
+        duv, pyramids = None, {}
+        if settings.texture_filter == "trilinear":                           # footprints: (H, W, 2) each
+            duv = [d * spacing for d in uv_derivatives(uvs, geo.mesh.faces, frags, geo.mesh.verts, scene.camera)]
         for k, m in enumerate(scene.meshes):
             if _has_texture(m):
-                texel = sample_texture(as_tensor(m.texture, dtype=like.dtype, device=like.device), uv,
-                                       settings.texture_filter)              # (H, W, 3)
+                texture = as_tensor(m.texture, dtype=like.dtype, device=like.device)
+                if duv is None:
+                    texel = sample_texture(texture, uv, settings.texture_filter)   # (H, W, 3)
+                else:
+                    if id(m.texture) not in pyramids:                        # one pyramid per texture
+                        pyramids[id(m.texture)] = mip_pyramid(texture)
+                    texel = sample_texture_mip(pyramids[id(m.texture)], uv, *duv)
                 base = torch.where((mesh_px == k)[..., None], texel[..., :3], base)
     return material_color, base
 
@@ -260,11 +299,21 @@ def _light(scene, geo, frags, mode, base, vert_normals) -> torch.Tensor:
     return phong_shading(geo.mesh, frags, scene.camera, scene.lights, per_face, base, vert_normals)[0]
 
 
-def _depth_image(frags) -> torch.Tensor:
-    """(H, W, 3) grey: nearest visible depth white, farthest black (normalised over the hit pixels)."""
+def _depth_range(frags):
+    """Nearest and farthest visible depth (detached), or None where nothing is visible."""
+    hit = frags.depth.detach()[frags.mask]
+    return (hit.min(), hit.max()) if hit.numel() else None
+
+
+def _depth_image(frags, depth_range=None) -> torch.Tensor:
+    """(..., 3) grey: nearest visible depth white, farthest black (normalised over the hit pixels, or over
+    ``depth_range``, the pixel-centre image's, so that samples are shaded like the pixels they refine)."""
     d = frags.depth
-    hit = d[frags.mask]
-    near, far = hit.min(), hit.max()
+    if depth_range is None:
+        hit = d[frags.mask]
+        near, far = hit.min(), hit.max()
+    else:
+        near, far = depth_range
     grey = 1 - (d - near) / (far - near).clamp_min(1e-12)
     return torch.where(frags.mask, grey, torch.zeros_like(grey))[..., None].expand(*d.shape, 3)
 
@@ -303,15 +352,68 @@ def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
         ran = tuple(p for p in passes if p in ("join", "cull_backfaces", "rasterize", "autograd"))
         empty = torch.zeros(*frags.shape, 3, dtype=geo.mesh.verts.dtype, device=geo.mesh.verts.device)
         return _result(_composite(empty, frags, scene.background, settings), frags, None, settings, ran)
-    material_color, base = _base_color(scene, geo, frags, settings, passes)  # texture / vertex colours
+    color, pixel_normals = _shade(scene, geo, frags, settings, passes)
+    wire = lambda img: wireframe_overlay(img, geo.mesh, frags, scene.camera, settings.wireframe_width,
+                                         settings.wireframe_color)
+    if "wireframe" in passes:
+        color = wire(color)
+    image = _composite(color, frags, scene.background, settings)            # (H, W, 3)
+    silhouette = frags.mask.to(image.dtype)
+    if "supersample" in passes:
+        image, silhouette, ran = _supersample(scene, geo, frags, settings, passes, image, silhouette)
+        passes = tuple(p for p in passes if p in ran or p not in ("detect_edges", "supersample"))
+        if "wireframe" in passes and "supersample" in ran:                  # lines over the filtered image
+            image = wire(image).clamp(0, 1) if settings.clamp else wire(image)
+    return _result(image, frags, pixel_normals, settings, passes, silhouette)
+
+
+def _shade(scene, geo, frags, settings, passes, depth_range=None, spacing=1.0):
+    """The colour of every fragment, (..., 3), and per-pixel normals when asked for; any fragments shape."""
+    material_color, base = _base_color(scene, geo, frags, settings, passes, spacing)   # texture / vertex colours
     vert_normals, pixel_normals = _normals(scene, geo, frags, settings, passes)
     lit = _light(scene, geo, frags, settings.shading, base, vert_normals) if "lighting" in passes else None
-    color = _pick_color(settings.shading, scene, frags, material_color, base, lit, pixel_normals)
-    if "wireframe" in passes:
-        color = wireframe_overlay(color, geo.mesh, frags, scene.camera, settings.wireframe_width,
-                                  settings.wireframe_color)
-    image = _composite(color, frags, scene.background, settings)
-    return _result(image, frags, pixel_normals, settings, passes)
+    return _pick_color(settings.shading, scene, frags, material_color, base, lit, pixel_normals,
+                       depth_range), pixel_normals
+
+
+def _edge_keys(geo, settings) -> torch.Tensor:
+    """(F,) integers: faces with equal keys show no jump across a shared edge. Flat shading gives every
+    face its own colour; otherwise the colour changes only between meshes (materials) and at seams."""
+    if settings.shading == "flat":
+        return torch.arange(geo.mesh.faces.shape[0], device=geo.mesh.faces.device)
+    return geo.face_mesh
+
+
+def _supersample(scene, geo, frags, settings, passes, image, silhouette):
+    """Replace pixels of the one-sample image by the box filter of k x k samples: all of them, or (adaptive)
+    those a discontinuity touches. Returns the image, the silhouette (covered fraction) and the passes run."""
+    from course.antialias import discontinuity_pixels, resolve, sample_fragments
+    H, W = frags.shape
+    k, ran = settings.samples, ("supersample",)
+    pixels = None
+    if settings.antialias == "adaptive":
+        ran = ("detect_edges",)
+        marked = discontinuity_pixels(geo.mesh, scene.camera, _edge_keys(geo, settings),
+                                      cull_backfaces=settings.cull_backfaces, seams=settings.shading != "flat")
+        pixels = marked.reshape(-1).nonzero().squeeze(1)
+        if pixels.numel() == 0:                                              # no edge crosses a pixel: done
+            return image, silhouette, ran
+        ran += ("supersample",)
+    sf = sample_fragments(geo.mesh, scene.camera, k, jitter=settings.jitter, seed=settings.seed, pixels=pixels,
+                          cull_backfaces=settings.cull_backfaces)           # (P, S)
+    if sf.mask.any():
+        color, _ = _shade(scene, geo, sf, settings, passes, _depth_range(frags), 1 / k)
+    else:
+        color = torch.zeros(*sf.shape, 3, dtype=image.dtype, device=image.device)
+    value = resolve(_composite(color, sf, scene.background, settings))      # (P, 3)
+    cover = resolve(sf.mask.to(image.dtype)[..., None])[:, 0]               # (P,)
+    if pixels is None:
+        return value.view(H, W, 3), cover.view(H, W), ran
+    # the other pixels' one sample stands for k² equal ones, summed the same way (bit-identical results)
+    image = resolve(image.reshape(-1, 1, 3).expand(-1, k * k, -1))
+    image = image.index_put((pixels,), value).view(H, W, 3)
+    silhouette = silhouette.reshape(-1).index_put((pixels,), cover).view(H, W)
+    return image, silhouette, ran
 
 
 def _normals(scene, geo, frags, settings, passes):
@@ -324,7 +426,7 @@ def _normals(scene, geo, frags, settings, passes):
     return vert_normals, None
 
 
-def _pick_color(mode, scene, frags, material_color, base, lit, pixel_normals) -> torch.Tensor:
+def _pick_color(mode, scene, frags, material_color, base, lit, pixel_normals, depth_range=None) -> torch.Tensor:
     """(H, W, 3) the colour the shading mode shows (a pass forced on for another mode is left unused)."""
     if mode in LIT_MODES and lit is not None:
         return lit
@@ -333,18 +435,20 @@ def _pick_color(mode, scene, frags, material_color, base, lit, pixel_normals) ->
     if mode == "wireframe":
         return as_tensor(scene.background, dtype=base.dtype, device=base.device).reshape(3).expand_as(base)
     if mode == "depth":
-        return _depth_image(frags).to(base.dtype)
+        return _depth_image(frags, depth_range).to(base.dtype)
     if mode == "normals":
         return (pixel_normals + 1) / 2
     return base                                                              # unlit, or lit without lights
 
 
-def _result(image, frags, pixel_normals, settings, ran) -> RenderResult:
+def _result(image, frags, pixel_normals, settings, ran, silhouette=None) -> RenderResult:
+    if settings.return_silhouette and silhouette is None:
+        silhouette = frags.mask.to(image.dtype)
     return RenderResult(
         image=image,
         depth=frags.depth if settings.return_depth else None,
         normals=pixel_normals if settings.return_normals else None,
-        silhouette=frags.mask.to(image.dtype) if settings.return_silhouette else None,
+        silhouette=silhouette if settings.return_silhouette else None,
         fragments=frags,
         passes=tuple(ran),
     )

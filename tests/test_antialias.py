@@ -45,7 +45,7 @@ def two_spheres(size=40):
     b = icosphere(2, radius=0.7, dtype=torch.float64)
     b = Mesh(b.verts + torch.tensor([0.9, 0.2, 0.6], dtype=torch.float64), b.faces)
     mesh = join_meshes([a, b])
-    return mesh, frame_camera(mesh, width=size, height=size)
+    return mesh, frame_camera(mesh, width=size, height=size).to(dtype=torch.float64)
 
 
 # ----------------------------------------------------------------------------------------- the samples
@@ -234,7 +234,7 @@ def test_adaptive_equals_full_supersampling_bit_for_bit(scene, jitter, k):
         cam = Camera(cam.K, R, t, 32, 32, near=0.2)
     else:
         mesh = teapot(4, dtype=torch.float64)
-        cam = frame_camera(mesh, width=40, height=32)
+        cam = frame_camera(mesh, width=40, height=32).to(dtype=torch.float64)
     F = mesh.faces.shape[0]
     for colors in (torch.ones(F, 3, dtype=torch.float64), torch.rand(F, 3, generator=g, dtype=torch.float64)):
         full_frags = aa.sample_fragments(mesh, cam, k, jitter=jitter, seed=2)
@@ -269,3 +269,59 @@ def test_supersampled_silhouette_edge_approaches_the_covered_area():
         img = aa.supersample(mesh, cam, ones, k)[..., 0]
         errs.append(float((img.sum() - 0.5 * 4 * h).abs()))
     assert errs[-1] < errs[0] and errs[-1] < 0.05
+
+
+# ------------------------------------------------------------------------------------------- in render()
+
+def _render_scene(shading_lights=True):
+    from course.render import Scene, default_lights
+    mesh, cam = two_spheres(40)
+    return Scene(mesh, cam, lights=default_lights() if shading_lights else (), background=(0.1, 0.2, 0.3))
+
+
+@pytest.mark.parametrize("shading", ["silhouette", "flat"])
+def test_render_adaptive_equals_supersample_on_piecewise_constant_images(shading):
+    from course.render import RenderSettings, render
+    sc = _render_scene()
+    full = render(sc, RenderSettings(shading=shading, antialias="supersample", samples=4, return_silhouette=True))
+    adaptive = render(sc, RenderSettings(shading=shading, antialias="adaptive", samples=4, return_silhouette=True))
+    none = render(sc, RenderSettings(shading=shading))
+    assert torch.equal(adaptive.image, full.image)
+    assert torch.equal(adaptive.silhouette, full.silhouette)
+    assert not torch.equal(none.image, full.image)                          # it did antialias
+    edge = (full.silhouette > 0) & (full.silhouette < 1)                    # partly covered pixels
+    assert edge.any() and "detect_edges" in adaptive.passes and "supersample" in adaptive.passes
+    assert "detect_edges" not in full.passes and "supersample" in full.passes
+
+
+def test_render_adaptive_skips_the_samples_when_no_edge_crosses_a_pixel():
+    """A plane filling the whole view: no silhouette, no colour change; one sample per pixel is exact."""
+    from course.models import plane
+    from course.render import RenderSettings, Scene, render
+    mesh = plane(40.0, 4, dtype=torch.float64)
+    cam = Camera.look_at((0.0, 3.0, 0.0), (0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0), fov_y=40.0, width=24,
+                         height=16).to(dtype=torch.float64)
+    sc = Scene(mesh, cam)
+    r = render(sc, RenderSettings(shading="silhouette", antialias="adaptive"))
+    assert "detect_edges" in r.passes and "supersample" not in r.passes
+    assert torch.equal(r.image, render(sc, RenderSettings(shading="silhouette")).image)
+    r_flat = render(sc, RenderSettings(shading="flat", antialias="adaptive"))  # every edge now counts
+    assert "supersample" in r_flat.passes
+
+
+def test_render_antialias_with_textures_gradients_and_bad_settings():
+    from course.render import RenderSettings, Scene, default_lights, render
+    mesh = teapot(4, dtype=torch.float64)
+    cam = frame_camera(mesh, width=32, height=24).to(dtype=torch.float64)
+    verts = mesh.verts.clone().requires_grad_(True)
+    sc = Scene(Mesh(verts, mesh.faces, uvs=mesh.uvs, texture=mesh.texture), cam, lights=default_lights())
+    for mode in ("supersample", "adaptive"):
+        r = render(sc, RenderSettings(antialias=mode, samples=2, texture_filter="trilinear", jitter=True))
+        assert r.image.shape == (24, 32, 3) and torch.isfinite(r.image).all()
+        r.image.sum().backward()
+        assert torch.isfinite(verts.grad).all() and verts.grad.abs().sum() > 0
+        verts.grad = None
+    with pytest.raises(ValueError, match="antialias must be one of"):
+        RenderSettings(antialias="msaa")
+    with pytest.raises(ValueError, match="samples"):
+        RenderSettings(antialias="supersample", samples=0)

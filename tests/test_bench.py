@@ -79,3 +79,24 @@ def test_bench_precision_reports_float32_against_float64(capsys):
     assert all(r["ms32"] > 0 and r["ms64"] > 0 and r["same"] > 0.99 for r in rows)
     assert all(0 < r["depth_p50"] <= r["depth_p99"] <= r["depth_max"] < 1e-4 for r in rows)
     assert "moved-1e5" in capsys.readouterr().out
+
+
+def test_bench_aa_rows_and_plot(tmp_path):
+    """The antialiasing bench on a tiny scene: every method, supersampling converging, adaptive equal to
+    full supersampling on flat colours, the exact method its own reference; the plot is written."""
+    import torch
+    from course.bench.aa import measure, plot_pareto
+    from course.camera import Camera
+    from course.models import icosphere
+    mesh = icosphere(1)
+    cam = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=24, height=20)
+    colors = torch.rand(mesh.faces.shape[0], 3, generator=torch.Generator().manual_seed(0))
+    rows = measure("tiny", repeat=1, scene=(mesh, cam, colors))
+    by = {r["method"]: r for r in rows}
+    assert {"none", "exact", "ss 2x2", "ss 8x8", "ss-jit 4x4", "adaptive 4x4", "adaptive-jit 8x8"} <= set(by)
+    assert by["exact"]["rmse"] == 0 and all(r["ms"] > 0 for r in rows)
+    assert by["ss 8x8"]["rmse"] < by["ss 2x2"]["rmse"] < by["none"]["rmse"]
+    for k in (2, 4, 8):
+        assert by[f"adaptive {k}x{k}"]["rmse"] == by[f"ss {k}x{k}"]["rmse"]
+    plot_pareto(rows, tmp_path / "pareto.png")
+    assert (tmp_path / "pareto.png").stat().st_size > 1000

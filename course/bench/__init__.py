@@ -8,6 +8,8 @@
   largest pixel difference between the two images.
 * ``precision`` (``course.bench.precision``): float32 against float64 on scenes where float32 is hard (sub-pixel
   triangles, far from the origin): time, and depth and barycentric error.
+* ``aa`` (``course.bench.aa``): antialiasing — one sample, supersampling (regular, jittered), adaptive
+  supersampling and exact coverage: time against RMSE to the exact image, a table and a Pareto plot.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options) and ``run(args)``,
 and one line in ``BENCHES`` below makes it a sub-command; ``--repeat`` and ``--json`` are common to all.
@@ -22,7 +24,7 @@ import json
 
 import torch
 
-from . import precision, raster, skips
+from . import aa, precision, raster, skips
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -30,7 +32,7 @@ from .timing import time_it, time_side_by_side
 __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "bench_skips", "cli"]
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
-BENCHES = {"raster": raster, "skips": skips, "precision": precision}
+BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa}
 
 
 def cli(argv) -> int:
