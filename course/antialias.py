@@ -26,8 +26,8 @@ import torch
 
 from .camera import Camera
 from .coverage import exact_coverage
-from .raster import (Fragments, _camera_space, _check_inputs, _plane, _project, _screen_triangles, edge_function,
-                     pixel_triangle_pairs, rasterize)
+from .raster import Fragments, _camera_space, _check_inputs, _project, _screen_triangles, rasterize
+from .scan import _plane, edge_function, pixel_triangle_pairs
 from .tensors import as_tensor
 
 __all__ = [

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import torch
 
-from . import raster
+from . import raster, scan
 from .camera import world_to_camera
 from .tensors import as_tensor
 
@@ -330,7 +330,7 @@ def _plan(verts, faces, camera) -> _Plan:
     H, W, F = camera.height, camera.width, faces.shape[0]
     vc = raster._camera_space(verts, camera)                                # (V, 3) float64, detached
     st = raster._screen_triangles(vc, faces, camera, False, reach=0.0)
-    pixel, tri = raster.pixel_triangle_pairs(st.xy, W, H)
+    pixel, tri = scan.pixel_triangle_pairs(st.xy, W, H)
     key = torch.unique(pixel * F + st.face.index_select(0, tri))            # one entry per (pixel, face)
     del pixel, tri
     pixel, face_id = key // F, key % F

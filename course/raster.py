@@ -3,7 +3,12 @@
 The pipeline of ``rasterize`` in four named stages::
 
     verts_world ─▶ camera space ─▶ clip, cull, project ─▶ scan-line coverage + z-buffer ─▶ Fragments
-                                  (_screen_triangles)     (_scan_convert, _zbuffer)      (_visible_surface)
+                                  (_screen_triangles)     (course.scan: _scan_convert,   (_visible_surface)
+                                                           _zbuffer; _sample_zbuffer)
+
+Stage 2, coverage and the z-buffer, lives in ``course.scan`` (the edge functions, scan conversion, and the
+sub-pixel samples of lecture 05); this module holds the other stages, the public ``rasterize`` and the
+lecture's building blocks.
 
 * **Coverage** is decided in screen space with edge functions (``edge_function``) and the top-left fill
   rule, so a pixel centre on an edge shared by two triangles is covered exactly once (watertight).
@@ -30,17 +35,14 @@ from dataclasses import dataclass
 import torch
 
 from .camera import Camera, world_to_camera
+from .scan import (EMPTY_KEY, _ScreenTriangles, _depth_keys, _faces_of, _is_top_left, _max3, _min3,
+                   _sample_zbuffer, _zbuffer, edge_function, pixel_triangle_pairs)
 from .tensors import as_tensor
 
 __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate", "edge_function", "inside_triangle",
-    "barycentric_2d", "perspective_correct_bary", "zbuffer_resolve", "clip_polygon_near",
+    "barycentric_2d", "perspective_correct_bary", "zbuffer_resolve", "clip_polygon_near", "pixel_triangle_pairs",
 ]
-
-# Work per chunk: (row segments, fragments). Bounds memory and keeps the working arrays small enough to stay
-# in cache (measured with `python -m course bench raster`).
-CHUNK = (1 << 16, 1 << 19)
-
 
 @dataclass(frozen=True)
 class Fragments:
@@ -66,27 +68,6 @@ class Fragments:
 
 
 # ------------------------------------------------------------------------------ the lecture's building blocks
-
-def edge_function(a, b, p) -> torch.Tensor:
-    """Twice the signed area of the triangle (a, b, p): ``(b - a) × (p - a)``.
-
-    a, b, p: (..., 2) image coordinates (x right, y down). Returns (...). Positive when p lies to the right of
-    a→b as seen on screen. Written as ``(a - p) × (b - p)`` so that swapping a and b negates the result
-    *exactly* in floating point: two triangles sharing an edge always disagree on its sign, never both win.
-    """
-    a, b, p = torch.broadcast_tensors(*(as_tensor(v) for v in (a, b, p)))
-    return (a[..., 0] - p[..., 0]) * (b[..., 1] - p[..., 1]) - (a[..., 1] - p[..., 1]) * (b[..., 0] - p[..., 0])
-
-
-def _is_top_left(a, b) -> torch.Tensor:
-    """Top-left rule for the edge a→b of a triangle with positive edge functions inside (y down).
-
-    A *top* edge is horizontal with the triangle below it (direction +x); a *left* edge has the triangle to
-    its right (direction -y). Reversing an edge flips the answer, so a shared edge belongs to one side only.
-    """
-    d = b - a
-    return (d[..., 1] < 0) | ((d[..., 1] == 0) & (d[..., 0] > 0))
-
 
 def _oriented(tri: torch.Tensor):
     """Triangles (..., 3, 2) reordered so that their area (edge function of v2) is positive, and that area."""
@@ -146,28 +127,6 @@ def perspective_correct_bary(bary_screen, z) -> torch.Tensor:
     w = b / z
     s = w.sum(-1, keepdim=True)
     return w / torch.where(s == 0, torch.ones_like(s), s)
-
-
-EMPTY_KEY = torch.iinfo(torch.int64).max    # z-buffer start value; its low 32 bits are all set
-
-
-def _depth_keys(depth: torch.Tensor, face_id: torch.Tensor, positive: bool = False) -> torch.Tensor:
-    """Pack (depth, face id) into int64 keys whose integer order is (depth, face) order.
-
-    The float32 bit pattern of a float orders like an int32 for positive values; negative ones (and -0.0)
-    are mirrored, a step skipped when the caller knows every depth is > 0 (``positive``, the perspective
-    fast path). The face id fills the low 32 bits, so equal depths resolve to the lower face id.
-    """
-    bits = depth.to(torch.float32).view(torch.int32).to(torch.int64)        # sign-extended int32
-    if not positive:
-        bits = torch.where(bits < 0, bits ^ 0x7FFFFFFF, bits)              # mirror negative floats
-    return (bits << 32) | face_id
-
-
-def _faces_of(zbuf: torch.Tensor) -> torch.Tensor:
-    """Face ids from resolved keys: the low 32 bits, and -1 where a pixel still holds ``EMPTY_KEY``
-    (adding 1 carries its all-ones low bits to zero)."""
-    return ((zbuf + 1) & 0xFFFFFFFF) - 1
 
 
 def zbuffer_resolve(pixel_index, depth, face_id, num_pixels: int):
@@ -248,34 +207,12 @@ def _check_inputs(mesh, camera):
     return verts, faces.long()
 
 
-def _min3(a):
-    """Smallest of the three columns of a (T, 3) tensor (faster than a reduction over a length-3 axis)."""
-    return torch.minimum(torch.minimum(a[:, 0], a[:, 1]), a[:, 2])
-
-
-def _max3(a):
-    """Largest of the three columns of a (T, 3) tensor."""
-    return torch.maximum(torch.maximum(a[:, 0], a[:, 1]), a[:, 2])
-
-
 def _camera_space(verts, camera):
     """World (V, 3) → camera space in float64, detached: coverage is decided in double precision."""
     return world_to_camera(verts.detach().double(), camera.R.detach().double(), camera.t.detach().double())
 
 
 # ------------------------------------------------------------------------ stage 1: clip, cull and project
-
-@dataclass
-class _ScreenTriangles:
-    """Triangles ready for scan conversion (float64, T of them after clipping and culling)."""
-    xy: torch.Tensor     # (T, 3, 2) screen coordinates, ordered so the area is positive
-    q: torch.Tensor      # (T, 3) the quantity affine on screen: 1/z (perspective) or z (orthographic)
-    face: torch.Tensor   # (T,) int64 id of the original face
-    crosses_far: bool = True   # False when no triangle reaches beyond the far plane (no per-pixel test)
-
-    def __getitem__(self, sl):
-        return _ScreenTriangles(self.xy[sl], self.q[sl], self.face[sl], self.crosses_far)
-
 
 def _clip_point(verts_cam, ia, ib, near):
     """Intersection of the edge (ia, ib) with the plane z = near, computed the same way from either side.
@@ -377,254 +314,6 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float 
     good = good.nonzero().squeeze(1)
     return _ScreenTriangles(xy.index_select(0, good), q.index_select(0, good), face.index_select(0, good),
                             crosses_far)
-
-
-# ------------------------------------------------------------------- stage 2: scan conversion + z-buffer
-
-def _row_range(xy, height):
-    """Rows whose pixel centres (y = i + 0.5) the triangles' y-extent reaches: first, last, count."""
-    y = xy[..., 1]
-    first = torch.ceil(_min3(y) - 0.5).clamp(min=0)
-    last = torch.floor(_max3(y) - 0.5).clamp(max=height - 1)
-    return first.long(), last.long(), (last - first + 1).clamp(min=0).long()
-
-
-def _expand(counts: torch.Tensor):
-    """Segments of the given lengths laid end to end: the owning segment of every element, and the start
-    of every segment (``repeat_interleave`` of the counts alone returns exactly the owners)."""
-    return torch.repeat_interleave(counts), torch.cumsum(counts, 0) - counts
-
-
-def _spans(x, y, row_y, width):
-    """Per (triangle, row) segment: the first and last covered pixel column, as float64 (S,) tensors.
-
-    x, y: (3, S) the triangle's screen vertices, one row per vertex; row_y: (S,) the row's centre.
-    Along the row, edge a→b (a = vertex k, b = vertex k+1) is the linear function ``E(px) = A px + r`` with
-    ``A = a_y - b_y``: it bounds the span from the left when A > 0 and from the right when A < 0, at the
-    crossing ``x0 = -r / A``. A pixel centre ``j + 0.5`` exactly on the crossing belongs to the triangle only
-    if the edge is a top or left edge. Watertightness does not depend on rounding: the two triangles sharing
-    an edge traverse it in opposite directions and compute *bit-identical* crossings (every operation below
-    is exactly antisymmetric in a and b), so one's last column is always the other's first minus one.
-    A horizontal edge (A = 0) keeps the whole row or none of it. The three edges are processed together as
-    (3, S) tensors, with arithmetic instead of ``torch.where`` (several times faster here).
-    """
-    BIG = 1e18
-    ax, ay, bx, by = x, y, x.roll(-1, 0), y.roll(-1, 0)                    # (3, S) edges v0→v1, v1→v2, v2→v0
-    da, db = ay - row_y, by - row_y
-    sign_a = torch.sign(ay - by)                                            # +1 left edge, -1 right edge
-    flat = 1 - sign_a.abs()                                                 # 1.0 for a horizontal edge
-    tl = (sign_a + flat * (bx > ax)).clamp_(0, 1)                           # top-left: A > 0, or flat going +x
-    x0 = ((bx * da - ax * db) / (ay - by + flat)).clamp_(-2, width + 2)     # the crossing, E(x0) = 0
-    f, c = torch.floor(x0 - 0.5), torch.ceil(x0 - 0.5)
-    on_centre = tl * (f + 1 - c)                                            # 1: a centre exactly on a top-left edge
-    first_col = f + 1 - on_centre                                           # first centre right of x0 (or on it)
-    last_col = c - 1 + on_centre                                            # last centre left of x0 (or on it)
-    is_left, is_right = sign_a.clamp(min=0), (-sign_a).clamp_(min=0)
-    first = (first_col * is_left - BIG * (1 - is_left)).amax(0).clamp_(min=0)
-    last = (last_col * is_right + BIG * (1 - is_right)).amin(0).clamp_(max=width - 1)
-    if not bool(flat.any()):
-        return first, last
-    # a horizontal edge: the whole row is inside if the row is on the inner side, E = da (a_x - b_x) > 0
-    inside_flat = (2 * torch.sign(da) * torch.sign(ax - bx) + tl).clamp_(0, 1)
-    empty = (flat * (1 - inside_flat)).sum(0)
-    return first, last - BIG * empty
-
-
-def _scan_convert(st: _ScreenTriangles, width: int, height: int):
-    """Stage 2a: enumerate covered pixels of a batch of triangles, row by row.
-
-    Returns flat pixel indices (M,) int64, the fragments' screen-affine q (M,) float64 and face id (M,).
-    """
-    T = st.face.numel()
-    first_row, _, n_rows = _row_range(st.xy, height)
-    tri_of_seg, seg_start = _expand(n_rows)                                 # one segment per (triangle, row)
-    row = torch.take(first_row.to(st.xy.dtype) - seg_start.to(st.xy.dtype), tri_of_seg) + torch.arange(
-        tri_of_seg.numel(), dtype=st.xy.dtype, device=st.xy.device)        # (S,) row index
-    row_y = row + 0.5                                                       # (S,) pixel-centre y of the row
-    corner = tri_of_seg + T * torch.arange(3, device=tri_of_seg.device)[:, None]   # (3, S) into (3, T)
-    xs = torch.take(st.xy[..., 0].T.contiguous(), corner)                   # (3, S)
-    ys = torch.take(st.xy[..., 1].T.contiguous(), corner)
-    first, last = _spans(xs, ys, row_y, width)
-    length = last - first + 1
-    seg = (length > 0).nonzero().squeeze(1)                                 # drop empty rows
-    tri_of_seg = tri_of_seg.index_select(0, seg)
-    row_y, first, length = row_y.index_select(0, seg), first.index_select(0, seg), length.index_select(0, seg)
-    # q = 1/z (or z) is affine on screen, q(px, py) = q0 + qx px + qy py; per pixel it is
-    # q_first + qx * (element index - segment start), folded so each pixel needs two look-ups
-    q0, qx, qy = (torch.take(t, tri_of_seg) for t in _plane(st))
-    seg_of_px, px_start = _expand(length.long())                            # one element per covered pixel
-    base = ((row_y - 0.5) * width + first).long() - px_start                # pixel = base + element index
-    q_base = q0 + qx * (first + 0.5 - px_start.to(first.dtype)) + qy * row_y
-    index = torch.arange(seg_of_px.numel(), device=first.device)
-    pixel = torch.take(base, seg_of_px) + index
-    q_px = torch.take(q_base, seg_of_px) + torch.take(qx, seg_of_px) * index
-    face = torch.take(st.face.index_select(0, tri_of_seg), seg_of_px)
-    return pixel, q_px, face
-
-
-def _plane(st: _ScreenTriangles):
-    """The affine function q(px, py) = q0 + qx px + qy py through the triangles' vertex values. (T,) each."""
-    xy, q = st.xy, st.q
-    e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]                       # (T, 2)
-    d1, d2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]                         # twice the area, > 0
-    qx, qy = (d1 * e2[:, 1] - d2 * e1[:, 1]) / det, (d2 * e1[:, 0] - d1 * e2[:, 0]) / det
-    return q[:, 0] - qx * xy[:, 0, 0] - qy * xy[:, 0, 1], qx, qy
-
-
-def _chunks(st: _ScreenTriangles, width, height, budget):
-    """Split triangles into consecutive batches of about ``budget[0]`` row segments and at most about
-    ``budget[1]`` fragments (estimated from bounding boxes): small enough that the working arrays stay in
-    cache and are reused, large enough that the fixed cost of each torch call is shared by many elements."""
-    seg_budget, frag_budget = budget
-    _, _, n_rows = _row_range(st.xy, height)
-    x = st.xy[..., 0]
-    n_cols = (_max3(x).clamp(max=width) - _min3(x).clamp(min=0)).clamp(min=0)
-    cost = torch.cumsum(n_rows / seg_budget + n_rows * n_cols / (2 * frag_budget), 0)   # (T,) in batches
-    if float(cost[-1]) <= 1:
-        yield st
-        return
-    batch = cost.long()                                                     # (T,) batch of each triangle
-    cuts = ((batch[1:] != batch[:-1]).nonzero().squeeze(1) + 1).tolist()
-    for lo, hi in zip([0] + cuts, cuts + [len(batch)]):
-        yield st[lo:hi]
-
-
-def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
-    """Stage 2b: the nearest face per pixel, (H*W,) int64, -1 where none. One scatter-min per chunk."""
-    H, W = camera.height, camera.width
-    zbuf = torch.full((H * W,), EMPTY_KEY, dtype=torch.int64, device=st.xy.device)
-    if st.face.numel() == 0:
-        return torch.full_like(zbuf, -1)
-    for chunk in _chunks(st, W, H, budget):
-        pixel, q, face = _scan_convert(chunk, W, H)
-        depth = q.float() if camera.orthographic else q.float().reciprocal_()
-        if chunk.crosses_far:                                               # the far plane clips per pixel
-            ok = (depth <= camera.far).nonzero().squeeze(1)
-            pixel, depth, face = pixel[ok], depth[ok], face[ok]
-        keys = _depth_keys(depth, face, positive=not camera.orthographic)  # orthographic z may round to -0.0
-        zbuf.scatter_reduce_(0, pixel, keys, reduce="amin")
-    return _faces_of(zbuf)
-
-
-# ------------------------------------------- stage 2, sub-pixel samples: the pixels a triangle touches
-
-def pixel_triangle_pairs(xy, width: int, height: int, mask=None):
-    """Every (pixel, triangle) pair whose closed pixel square and triangle touch: conservative coverage.
-
-    xy: (T, 3, 2) screen triangles; width, height: the image; mask: None, or an (H*W,) bool tensor of the
-    pixels to consider (the others are never enumerated). Returns ``pixel`` (N,) flat pixel indices
-    (row-major) and ``tri`` (N,) indices into xy, grouped by triangle.
-
-    Where ``rasterize`` asks whether a triangle covers a pixel's *centre*, this asks whether it touches the
-    pixel's *square* at all: a sliver between two centres, or a triangle smaller than a pixel, still shows
-    up. Row by row, the triangle is cut to the band ``[i, i+1]`` and the x-extent of that piece gives the
-    columns. The extents are widened by a few rounding errors, so a pair is never lost to rounding; a pair
-    that only touches a pixel's border (zero shared area) may be listed, which callers must tolerate.
-    """
-    xy = as_tensor(xy, dtype=torch.float64, name="xy")
-    device = xy.device
-    if xy.dim() != 3 or xy.shape[1:] != (3, 2):
-        raise ValueError(f"xy must have shape (T, 3, 2), got {tuple(xy.shape)}")
-    none = torch.zeros(0, dtype=torch.int64, device=device)
-    if xy.shape[0] == 0 or width <= 0 or height <= 0:
-        return none, none
-    slack = 1e-9 * (1 + xy.abs().amax((1, 2)))                              # (T,) a few rounding errors
-    y = xy[..., 1]
-    first = torch.floor(_min3(y) - slack).clamp(min=0)
-    last = (torch.ceil(_max3(y) + slack) - 1).clamp(max=height - 1)
-    tri_of_seg, seg_start = _expand((last - first + 1).clamp(min=0).long())
-    row = first.index_select(0, tri_of_seg) + (torch.arange(tri_of_seg.numel(), device=device)
-                                               - seg_start.index_select(0, tri_of_seg))   # (S,) band top
-    a = xy.index_select(0, tri_of_seg)                                      # (S, 3, 2) corners
-    b = a.roll(-1, 1)                                                       # edges a→b
-    lo, hi = row[:, None], row[:, None] + 1                                 # (S, 1) the band
-    dy = b[..., 1] - a[..., 1]
-    flat = dy == 0
-    t0 = (lo - a[..., 1]) / torch.where(flat, torch.ones_like(dy), dy)      # where the edge meets y = lo, hi
-    t1 = (hi - a[..., 1]) / torch.where(flat, torch.ones_like(dy), dy)
-    t_in = torch.minimum(t0, t1).clamp(min=0)                               # the part of the edge in the band
-    t_out = torch.maximum(t0, t1).clamp(max=1)
-    in_band = (a[..., 1] >= lo) & (a[..., 1] <= hi)
-    t_in = torch.where(flat, torch.zeros_like(t_in), t_in)
-    t_out = torch.where(flat, torch.ones_like(t_out), t_out)
-    ok = torch.where(flat, in_band, t_in <= t_out)                          # (S, 3)
-    dx = b[..., 0] - a[..., 0]
-    x_in, x_out = a[..., 0] + t_in * dx, a[..., 0] + t_out * dx
-    inf = torch.full_like(x_in, float("inf"))
-    x_lo = torch.where(ok, torch.minimum(x_in, x_out), inf).amin(1)         # (S,)
-    x_hi = torch.where(ok, torch.maximum(x_in, x_out), -inf).amax(1)
-    pad = slack.index_select(0, tri_of_seg)
-    meets = torch.isfinite(x_lo)                                            # a band the slack added may be empty
-    col0 = torch.where(meets, torch.floor(x_lo - pad), torch.zeros_like(x_lo)).clamp(min=0)
-    col1 = torch.where(meets, torch.ceil(x_hi + pad) - 1, torch.full_like(x_hi, -1.0)).clamp(max=width - 1)
-    count = (col1 - col0 + 1).clamp(min=0).long()                           # empty where off the image
-    base = (row * width + col0.clamp(max=width - 1)).long()                 # (only empty segments move)
-    if mask is not None:                                                    # skip segments with no wanted pixel
-        mask = torch.as_tensor(mask, device=device).reshape(-1).bool()
-        if mask.numel() != width * height:
-            raise ValueError(f"mask must have H*W = {width * height} entries, got {mask.numel()}")
-        cum = torch.cat([torch.zeros(1, dtype=torch.int64, device=device), torch.cumsum(mask.long(), 0)])
-        wanted = (cum.index_select(0, base + count) - cum.index_select(0, base)) > 0
-        count = count * wanted
-    seg_of_px, px_start = _expand(count)
-    pixel = base.index_select(0, seg_of_px) + (torch.arange(seg_of_px.numel(), device=device)
-                                                - px_start.index_select(0, seg_of_px))
-    tri = tri_of_seg.index_select(0, seg_of_px)
-    if mask is not None:
-        keep = mask.index_select(0, pixel).nonzero().squeeze(1)
-        pixel, tri = pixel.index_select(0, keep), tri.index_select(0, keep)
-    return pixel, tri
-
-
-def _sample_inside(xy, points):
-    """Top-left coverage of points by triangles with positive area. xy: (N, 3, 2); points: (N, S, 2).
-
-    The same edge functions and fill rule as ``inside_triangle``, so a sample on an edge shared by two
-    triangles is covered exactly once."""
-    inside = torch.ones(points.shape[:2], dtype=torch.bool, device=points.device)
-    for k in range(3):
-        a, b = xy[:, k, None, :], xy[:, (k + 1) % 3, None, :]              # (N, 1, 2)
-        e = edge_function(a, b, points)                                     # (N, S)
-        inside &= (e > 0) | ((e == 0) & _is_top_left(a, b))
-    return inside
-
-
-def _sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets, budget=CHUNK[1]) -> torch.Tensor:
-    """Stage 2 for sub-pixel samples: the nearest face at every sample of the listed pixels.
-
-    pixels: (P,) flat pixel indices; offsets: (S, 2) the same for every pixel, or (P, S, 2) one set per
-    pixel, each from the pixel's top-left corner. Returns (P, S) int64 face ids, -1 where none. A sample's
-    answer depends only on its own position, never on which other pixels or samples are asked for, so a
-    subset of pixels gets bit-identical ids to the full image.
-    """
-    H, W = camera.height, camera.width
-    P, S = pixels.numel(), offsets.shape[-2]
-    device = st.xy.device
-    zbuf = torch.full((P * S,), EMPTY_KEY, dtype=torch.int64, device=device)
-    if st.face.numel() == 0 or P == 0:
-        return torch.full((P, S), -1, dtype=torch.int64, device=device)
-    slot_of = torch.full((H * W,), -1, dtype=torch.int64, device=device)
-    slot_of[pixels] = torch.arange(P, device=device)
-    q0, qx, qy = _plane(st)
-    pixel, tri = pixel_triangle_pairs(st.xy, W, H, slot_of >= 0)
-    step = max(1, budget // S)
-    for lo in range(0, pixel.numel(), step):                                # bounded memory: step * S samples
-        pix, t = pixel[lo:lo + step], tri[lo:lo + step]
-        slot = slot_of.index_select(0, pix)
-        corner = torch.stack([pix % W, pix // W], 1).double()               # (N, 2) top-left corner
-        off = offsets[None] if offsets.dim() == 2 else offsets.index_select(0, slot)
-        points = corner[:, None, :] + off                                   # (N, S, 2)
-        inside = _sample_inside(st.xy.index_select(0, t), points)
-        n, s = inside.nonzero().unbind(1)
-        tn = t.index_select(0, n)
-        p = points[n, s]
-        q = q0.index_select(0, tn) + qx.index_select(0, tn) * p[:, 0] + qy.index_select(0, tn) * p[:, 1]
-        depth = q.float() if camera.orthographic else q.float().reciprocal_()
-        ok = depth <= camera.far
-        keys = _depth_keys(depth[ok], st.face.index_select(0, tn)[ok], positive=not camera.orthographic)
-        zbuf.scatter_reduce_(0, (slot.index_select(0, n) * S + s)[ok], keys, reduce="amin")
-    return _faces_of(zbuf).view(P, S)
 
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably

@@ -6,6 +6,7 @@ import torch
 from hypothesis import given, settings, strategies as st
 
 import course.raster as raster
+import course.scan as scan
 from course.camera import Camera, axis_angle_to_matrix
 from course.mesh import Mesh
 from course.models import cube, icosphere, plane
@@ -93,7 +94,7 @@ def test_square_split_in_two_covers_diagonal_once():
     assert fr.mask.all()
     counts = torch.zeros(64, dtype=torch.long)
     for f in range(2):
-        pix, _, _ = raster._scan_convert(raster._screen_triangles(
+        pix, _, _ = scan._scan_convert(raster._screen_triangles(
             _cam_verts(mesh, ortho8()), mesh.faces[f:f + 1], ortho8(), False), 8, 8)
         counts += torch.bincount(pix, minlength=64)
     assert torch.equal(counts, torch.ones(64, dtype=torch.long))
@@ -121,8 +122,8 @@ def test_chunking_gives_identical_fragments():
     cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=40, width=64, height=48)
     whole = rasterize(mesh, cam)
     st_all = raster._screen_triangles(_cam_verts(mesh, cam), mesh.faces, cam, False)
-    assert len(list(raster._chunks(st_all, 64, 48, (97, 97)))) > 20               # many tiny chunks
-    chunked = raster._zbuffer(st_all, cam, budget=(97, 97))
+    assert len(list(scan._chunks(st_all, 64, 48, (97, 97)))) > 20               # many tiny chunks
+    chunked = scan._zbuffer(st_all, cam, budget=(97, 97))
     assert torch.equal(chunked.view(48, 64), whole.face_id)
 
 
@@ -131,7 +132,7 @@ def test_chunking_gives_identical_fragments():
 def layer_counts(mesh, cam):
     """Per pixel, over ALL faces (not only the visible one): fragments of front faces and of back faces."""
     st_all = raster._screen_triangles(raster._camera_space(mesh.verts, cam), mesh.faces, cam, False)
-    pix, _, face = raster._scan_convert(st_all, cam.width, cam.height)
+    pix, _, face = scan._scan_convert(st_all, cam.width, cam.height)
     xy, _ = cam.project(mesh.verts.double())
     tri = xy[mesh.faces]
     front = edge_function(tri[:, 0], tri[:, 1], tri[:, 2])[face] < 0        # CCW on screen (y down)
