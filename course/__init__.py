@@ -3,6 +3,7 @@
 The pipeline::
 
     Mesh + Camera ──project──▶ screen-space triangles ──rasterize──▶ Fragments ──shade──▶ image
+                                                     (or k × k samples per pixel, box-filtered: antialiasing)
 
 Conventions (fixed; ``tests/test_conventions.py`` pins each one):
 
@@ -25,6 +26,7 @@ S samples.
 The ``render()`` function lives in ``course.render`` (``from course.render import render``); it is not
 re-exported here, so that ``course.render`` always names the module.
 """
+from .antialias import adaptive_supersample, exact_coverage, supersample
 from .camera import (Camera, axis_angle_to_matrix, euler_to_matrix, homogeneous, intrinsics_from_fov, look_at,
                      pixel_rays, project_points, transform_points, world_to_camera)
 from .mesh import Mesh, join_meshes, load_mesh
@@ -45,6 +47,8 @@ __all__ = [
     "world_to_camera", "project_points", "pixel_rays", "intrinsics_from_fov",
     # rasterization
     "Fragments", "rasterize", "rasterize_naive", "interpolate",
+    # antialiasing
+    "supersample", "adaptive_supersample", "exact_coverage",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
     "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",

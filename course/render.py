@@ -498,6 +498,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fov", type=float, default=40.0, help="vertical field of view in degrees (default 40)")
     p.add_argument("--shading", default="phong", choices=SHADING_MODES, help="shading mode (default phong)")
     p.add_argument("--wireframe", action="store_true", help="draw the visible edges on top")
+    p.add_argument("--antialias", default="none", choices=ANTIALIAS_MODES,
+                   help="none (one sample per pixel, the default), supersample (k x k samples in every pixel) or "
+                        "adaptive (k x k only where an edge crosses the pixel)")
+    p.add_argument("--samples", type=int, default=4, metavar="K", help="samples per axis when antialiasing (4)")
+    p.add_argument("--texture-filter", default="bilinear", choices=TEXTURE_FILTERS,
+                   help="texture lookup: nearest, bilinear (default) or trilinear (mipmaps)")
     p.add_argument("--background", nargs=3, type=float, default=(1.0, 1.0, 1.0), metavar=("R", "G", "B"),
                    help="background colour, linear RGB in [0, 1] (default white)")
     return p
@@ -545,7 +551,9 @@ def cli(argv: list[str]) -> int:
         mesh = mesh.to(dtype=torch.float32)
         camera = frame_camera(mesh, width=width, height=height, fov_y=args.fov, eye=args.eye)
         scene = Scene(mesh, camera, lights=default_lights(), background=args.background)
-        result = render(scene, RenderSettings(shading=args.shading, wireframe=args.wireframe))
+        result = render(scene, RenderSettings(shading=args.shading, wireframe=args.wireframe,
+                                              antialias=args.antialias, samples=args.samples,
+                                              texture_filter=args.texture_filter))
         _save_png(result.image, args.out)
     except (ValueError, TypeError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
