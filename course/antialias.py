@@ -210,6 +210,9 @@ def _seam_edges(weld, faces) -> torch.Tensor:
     return (lo != hi)[edge_of].view(-1, 3)
 
 
+MAX_CELLS = 512          # a face whose box spans more grid cells skips the grid (_intersecting_faces)
+
+
 def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     """(F,) bool: faces that may cross another face with which they share no vertex (in 3D, conservative).
 
@@ -228,6 +231,8 @@ def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     c_lo, c_hi = torch.floor(lo / size).long(), torch.floor(hi / size).long()
     span = c_hi - c_lo + 1                                                   # (F, 3) cells per axis
     count = span.prod(1)
+    huge = count > MAX_CELLS                                                 # a few faces far larger than most:
+    count = torch.where(huge, torch.zeros_like(count), count)                # paired with every box they meet
     face = torch.repeat_interleave(torch.arange(F, device=faces.device), count)
     k = torch.arange(face.numel(), device=faces.device) - torch.repeat_interleave(torch.cumsum(count, 0) - count, count)
     sx, sy = span[face, 0], span[face, 1]
@@ -238,6 +243,9 @@ def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     order = torch.argsort(key)
     i, j = _pairs_within_groups(key[order])
     f, g = face[order][i], face[order][j]
+    for h in huge.nonzero().squeeze(1).tolist():
+        meets = ((lo[h] <= hi) & (lo <= hi[h])).all(1).nonzero().squeeze(1)
+        f, g = torch.cat([f, torch.full_like(meets, h)]), torch.cat([g, meets])
     pair = torch.sort(torch.minimum(f, g) * F + torch.maximum(f, g)).values
     pair = pair[torch.cat([pair.new_ones(min(1, pair.numel()), dtype=torch.bool), pair[1:] != pair[:-1]])]
     f, g = pair // F, pair % F

@@ -325,3 +325,19 @@ def test_render_antialias_with_textures_gradients_and_bad_settings():
         RenderSettings(antialias="msaa")
     with pytest.raises(ValueError, match="samples"):
         RenderSettings(antialias="supersample", samples=0)
+
+
+def test_intersection_with_a_huge_face_is_found():
+    """A two-triangle plane far larger than the sphere's faces cuts through it: the intersection line is a
+    jump the detector must mark (huge faces skip the grid and meet every box they overlap)."""
+    from course.models import plane
+    sphere = icosphere(2, dtype=torch.float64)
+    ground = plane(50.0, 1, dtype=torch.float64)
+    mesh = join_meshes([sphere, ground])
+    cam = Camera.look_at((0.5, 1.2, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=32, height=32).to(dtype=torch.float64)
+    colors = torch.ones(mesh.faces.shape[0], 3, dtype=torch.float64)
+    colors[sphere.faces.shape[0]:] = torch.tensor([0.2, 0.5, 0.9], dtype=torch.float64)
+    full = aa.supersample(mesh, cam, colors, 4)
+    adaptive, marked = aa.adaptive_supersample(mesh, cam, colors, 4)
+    assert torch.equal(adaptive, full)
+    assert aa._intersecting_faces(mesh.verts, mesh.faces, aa._weld(mesh.verts))[-2:].all()
