@@ -27,7 +27,7 @@ import torch
 from .camera import Camera
 from .coverage import exact_coverage
 from .raster import Fragments, _camera_space, _check_inputs, _project, _screen_triangles, rasterize
-from .scan import _plane, edge_function, pixel_triangle_pairs
+from .scan import edge_function, pixel_triangle_pairs
 from .tensors import as_tensor
 
 __all__ = [
@@ -213,8 +213,8 @@ def _seam_edges(weld, faces) -> torch.Tensor:
 MAX_CELLS = 512          # a face whose box spans more grid cells skips the grid (_intersecting_faces)
 
 
-def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
-    """(F,) bool: faces that may cross another face with which they share no vertex (in 3D, conservative).
+def _intersecting_faces(verts, faces, weld):
+    """Pairs of faces that may cross each other and share no vertex (in 3D, conservative): f, g (N,) each.
 
     Broad phase: a uniform grid of cells about one face wide; faces whose bounding boxes share a cell are
     candidates. Narrow phase: the boxes overlap, and each face has corners strictly on both sides of the
@@ -222,9 +222,9 @@ def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
     closed, non-self-intersecting mesh fail it; the teapot's spout and body pass.
     """
     F = faces.shape[0]
-    hit = torch.zeros(F, dtype=torch.bool, device=faces.device)
+    none = torch.zeros(0, dtype=torch.int64, device=faces.device)
     if F < 2:
-        return hit
+        return none, none
     v = verts[faces]                                                         # (F, 3, 3)
     lo, hi = v.amin(1), v.amax(1)
     size = (hi - lo).amax(1).median().clamp_min(1e-12)                       # cell: a typical face
@@ -258,9 +258,24 @@ def _intersecting_faces(verts, faces, weld) -> torch.Tensor:
         tol = 1e-9 * n.norm(dim=1) * (hi[b] - lo[b]).abs().amax(1)
         return (d.amax(1) > tol) & (d.amin(1) < -tol)
     both = straddles(f, g) & straddles(g, f)
-    hit[f[both]] = True
-    hit[g[both]] = True
-    return hit
+    return f[both], g[both]
+
+
+def _crossing_segments(verts, faces, f, g):
+    """Where face f meets the plane of face g: for each pair, the (up to 3) segments (N, 3, 2, 3) between
+    the points where f's edges reach g's plane, and which of them exist (N, 3). The line where two faces
+    intersect lies on this segment, so marking its pixels marks the intersection (a superset of it)."""
+    v = verts[faces[f]]                                                     # (N, 3, 3) f's corners
+    w = verts[faces[g]]
+    n = torch.linalg.cross(w[:, 1] - w[:, 0], w[:, 2] - w[:, 0])            # g's plane
+    d = ((v - w[:, :1]) * n[:, None]).sum(-1)                               # (N, 3) signed distances
+    d1 = d.roll(-1, 1)
+    reach = ((d <= 0) & (d1 >= 0)) | ((d >= 0) & (d1 <= 0))                 # edge k → k+1 meets the plane
+    s = torch.where(d == d1, torch.zeros_like(d), d / torch.where(d == d1, torch.ones_like(d), d - d1))
+    p = v + s[..., None] * (v.roll(-1, 1) - v)                              # (N, 3, 3) the meeting points
+    a, b = p, p.roll(-1, 1)                                                 # segments between them
+    ok = reach & reach.roll(-1, 1)
+    return torch.stack([a, b], 2), ok
 
 
 def _discontinuous_edges(verts_cam, faces, weld, camera, keys, in_view, cull_backfaces):
@@ -306,8 +321,9 @@ def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces
     face_keys: (F,) integers, faces with equal keys have equal colours (None: all equal, a silhouette;
     use one key per distinct colour for flat colours). A pixel is marked when its square touches
     (a) an edge where the image may jump (``_discontinuous_edges``: silhouettes and folds, boundaries, colour
-    changes), (b) any edge of a face cut by the near or the far plane (the cut itself is an edge), or (c) a
-    place where two faces sharing no vertex may intersect. The test is conservative: it may mark a pixel
+    changes), (b) any edge of a face cut by the near or the far plane (the cut itself is an edge), or (c) the
+    segment where a face crosses the plane of another face it may intersect (``_intersecting_faces``), which
+    holds the intersection line. The test is conservative: it may mark a pixel
     where the jump turns out to be hidden, never miss one; so on an unmarked pixel all samples see one colour.
     seams: also mark edges where the two faces meet at the same positions but different vertices (split for
     uvs or normals): attributes interpolated from those vertices may jump there (shaded and textured images).
@@ -351,10 +367,26 @@ def discontinuity_pixels(mesh, camera: Camera, face_keys=None, *, cull_backfaces
             seg_tris = torch.stack([segs_a, segs_b, segs_b], 1)              # degenerate: the segment
             pix, _ = pixel_triangle_pairs(seg_tris, W, H)
             marked[pix] = True
-        crossing = _intersecting_faces(verts.detach().double(), faces, weld)[st.face]
-        if crossing.any():                                                   # all pixels such faces touch
-            pix, _ = pixel_triangle_pairs(xy[crossing], W, H)
-            marked[pix] = True
+        f, g = _intersecting_faces(verts.detach().double(), faces, weld)
+        if f.numel():                                                        # the lines where faces cross
+            seg, ok = _crossing_segments(verts_cam, faces, torch.cat([f, g]), torch.cat([g, f]))
+            seg = seg[ok]                                                    # (M, 2, 3) camera space
+            z = seg[..., 2]
+            front = (z >= camera.near).all(1)
+            if not front.all():                                              # cut at the near plane
+                keep = (z >= camera.near).any(1)
+                lo, hi = seg[:, 0], seg[:, 1]
+                t = ((camera.near - lo[:, 2]) / torch.where(hi[:, 2] == lo[:, 2], torch.ones_like(z[:, 0]),
+                                                            hi[:, 2] - lo[:, 2])).clamp(0, 1)[:, None]
+                cut = lo + t * (hi - lo)
+                lo = torch.where((lo[:, 2] < camera.near)[:, None], cut, lo)
+                hi = torch.where((hi[:, 2] < camera.near)[:, None], cut, hi)
+                seg = torch.stack([lo, hi], 1)[keep]
+            ends, _ = _project(seg.reshape(-1, 3), camera, camera.K.detach().to(torch.float64))
+            ends = ends.view(-1, 2, 2)
+            if ends.numel():
+                pix, _ = pixel_triangle_pairs(torch.stack([ends[:, 0], ends[:, 1], ends[:, 1]], 1), W, H)
+                marked[pix] = True
     return marked.view(H, W)
 
 

@@ -35,7 +35,7 @@ import torch
 
 from course.camera import Camera
 from course.mesh import Mesh
-from course.raster import Fragments, interpolate, rasterize
+from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.shading import (
     AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, mip_pyramid, normalize,
     phong_shading, sample_texture, sample_texture_mip, uv_derivatives, wireframe_overlay,
@@ -75,7 +75,7 @@ class Scene:
         for i, m in enumerate(meshes):
             if not isinstance(m, Mesh):
                 raise TypeError(f"scene mesh {i} is a {type(m).__name__}, not a Mesh (course.mesh.Mesh)")
-        if not isinstance(self.camera, Camera):
+        if not _is_camera(self.camera):
             raise TypeError(f"camera must be a course.camera.Camera, got {type(self.camera).__name__}")
         if self.camera.width < 1 or self.camera.height < 1:
             raise ValueError(f"the camera image is empty ({self.camera.width}x{self.camera.height} pixels)")

@@ -42,8 +42,12 @@ def cli(argv) -> int:
         sub = which.add_parser(name, help=module.DESCRIPTION, description=module.DESCRIPTION)
         sub.add_argument("--repeat", type=int, default=7, help="timed runs per measurement (median reported)")
         sub.add_argument("--json", help="also write the rows to this JSON file")
+        sub.add_argument("--threads", type=int, help="torch threads (default: torch's choice); 1 gives steadier "
+                                                     "timings on a machine shared with other jobs")
         module.add_arguments(sub)
     args = parser.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     rows = BENCHES[args.which].run(args)
     if args.json:

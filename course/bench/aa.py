@@ -18,7 +18,6 @@ supersampling there.
 """
 from __future__ import annotations
 
-import math
 
 import torch
 
@@ -165,6 +164,8 @@ def plot_pareto(rows, path=None, ax=None):
             a.axvline(exact[0]["ms"], color="0.3", ls="--", lw=1, label="exact (RMSE 0)")
         a.set_xscale("log")
         a.set_yscale("log")
+        a.xaxis.set_minor_formatter(plt.NullFormatter())                     # decade labels only
+        a.yaxis.set_minor_formatter(plt.NullFormatter())
         a.set_xlabel("time (ms)")
         a.set_ylabel("RMSE to the exact image")
         a.set_title(name)

@@ -95,9 +95,9 @@ def _texture_variants(sample, texture, uv) -> list:
              "u = (c + 0.5) / Wt, not c / (Wt - 1)")]
 
 
-@task("4.3", "sample_bilinear", points=3, reference=("course.shading", "sample_texture"))
+@task("4.3", "sample_bilinear", points=3, reference=("course.textures", "sample_texture"))
 def _check_sample_bilinear(impl):
-    ref = _ref("course.shading", "sample_texture")
+    ref = _ref("course.textures", "sample_texture")
     sample = lambda tex, uv, mode="bilinear": ref(tex, uv, mode=mode)  # noqa: E731
 
     def run(texture, uv, name, check_dtype=False):
@@ -158,7 +158,7 @@ def _mip_variants(dx, dy, size) -> list:
 
 
 def _mip_problem(got, dx, dy, size, name, check_dtype) -> str | None:
-    expected = _ref("course.shading", "mip_level")(dx, dy, size)
+    expected = _ref("course.textures", "mip_level")(dx, dy, size)
     message = _diagnose(got, expected, name, _mip_variants(dx, dy, size), check_dtype=check_dtype)
     if message and "inf at" in message:
         message += ": where the derivatives are zero log2 ρ is -inf; clamp λ at 0"
@@ -176,7 +176,7 @@ def _mip_derivatives(n, seed, dtype, low=-1.0, high=8.0):
     return d[:, 0].to(dtype), d[:, 1].to(dtype)
 
 
-@task("4.4", "mip_level", points=3, reference=("course.shading", "mip_level"))
+@task("4.4", "mip_level", points=3, reference=("course.textures", "mip_level"))
 def _check_mip_level(impl):
     def run(dx, dy, size, name, check_dtype=False):
         require(_mip_problem(_call(impl, dx, dy, size), dx, dy, size, name, check_dtype))
