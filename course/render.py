@@ -3,7 +3,8 @@
 ::
 
     plan ─▶ join meshes ─▶ rasterize (cull) ─▶ base colour (texture / vertex colours / material)
-         ─▶ normals ─▶ lighting (flat | Gouraud | Phong) ─▶ composite over the background
+         ─▶ normals ─▶ shadow maps (lights that cast shadows) ─▶ lighting (flat | Gouraud | Phong)
+         ─▶ composite over the background
          ─▶ antialias: detect edge pixels, shade k × k samples there (or everywhere), box-filter ─▶ wireframe
 
 Each stage runs only when the scene and settings need it: an unlit scene (or one without lights) computes
@@ -37,9 +38,10 @@ from course.camera import Camera
 from course.mesh import Mesh
 from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.shading import (
-    AmbientLight, DirectionalLight, Material, flat_shading, gouraud_shading, mip_pyramid, normalize,
+    AmbientLight, DirectionalLight, Material, PointLight, flat_shading, gouraud_shading, mip_pyramid, normalize,
     phong_shading, sample_texture, sample_texture_mip, uv_derivatives, wireframe_overlay,
 )
+from course.shadows import shadow_factor, shadow_map
 from course.tensors import as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
@@ -50,6 +52,7 @@ LIT_MODES = ("phong", "gouraud", "flat")
 COLOR_MODES = LIT_MODES + ("unlit",)                       # modes that show textures and vertex colours
 FORCEABLE = ("normals", "lighting", "texture", "autograd")
 ANTIALIAS_MODES = ("none", "supersample", "adaptive")
+SHADOW_MODES = ("none", "map")
 TEXTURE_FILTERS = ("bilinear", "nearest", "trilinear")
 
 
@@ -124,6 +127,10 @@ class RenderSettings:
     jitter: stratified jittered samples instead of a regular grid, from a hash of (``seed``, pixel, sample).
     With antialiasing the image and the silhouette are box-filtered (each sample clamped, then averaged);
     depth and normals come from the pixel centres, and the wireframe is drawn over the filtered image.
+    shadows: ``"none"``, or ``"map"`` (lectures 06: a shadow map per light whose ``cast_shadows`` is set,
+    ``shadow_resolution`` texels a side, ``shadow_pcf`` × ``shadow_pcf`` percentage-closer filtering). A
+    light's direct contribution (diffuse and highlight) is weighted per pixel by how lit the pixel is;
+    ambient light is never shadowed.
     """
     shading: str = "phong"
     texture_filter: str = "bilinear"
@@ -140,6 +147,9 @@ class RenderSettings:
     samples: int = 4
     jitter: bool = False
     seed: int = 0
+    shadows: str = "none"
+    shadow_resolution: int = 1024
+    shadow_pcf: int = 1
 
     def __post_init__(self):
         if self.shading not in SHADING_MODES:
@@ -154,6 +164,12 @@ class RenderSettings:
                              f"got {self.antialias!r}")
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
             raise ValueError(f"samples (per axis) must be a positive int, got {self.samples!r}")
+        if self.shadows not in SHADOW_MODES:
+            raise ValueError(f"shadows must be one of {', '.join(map(repr, SHADOW_MODES))}, got {self.shadows!r}")
+        if not isinstance(self.shadow_resolution, int) or self.shadow_resolution < 1:
+            raise ValueError(f"shadow_resolution must be a positive int, got {self.shadow_resolution!r}")
+        if not isinstance(self.shadow_pcf, int) or self.shadow_pcf < 1 or self.shadow_pcf % 2 == 0:
+            raise ValueError(f"shadow_pcf must be a positive odd int, got {self.shadow_pcf!r}")
 
 
 @dataclass(frozen=True)
@@ -200,6 +216,7 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
         "texture": mode in COLOR_MODES and settings.textures and any(map(_has_texture, scene.meshes)),
         "vertex_colors": mode in COLOR_MODES and any(m.vert_colors is not None for m in scene.meshes),
         "normals": lit or mode == "normals" or settings.return_normals,
+        "shadow_maps": lit and settings.shadows == "map" and _casters(scene.lights) != [],
         "lighting": lit,
         "detect_edges": settings.antialias == "adaptive",                 # lecture 05: after shading the
         "supersample": settings.antialias != "none",                      # centres, refine edge pixels
@@ -286,17 +303,47 @@ def _pixel_normals(geo, frags, vert_normals, flat: bool) -> torch.Tensor:
     return normalize(interpolate(vert_normals, frags, geo.mesh.faces))
 
 
-def _light(scene, geo, frags, mode, base, vert_normals) -> torch.Tensor:
-    """(H, W, 3) lit colour with the mode's interpolation (Phong when forced on for an unlit mode)."""
+def _light(scene, geo, frags, mode, base, vert_normals, shadows=None, pcf: int = 1) -> torch.Tensor:
+    """(H, W, 3) lit colour with the mode's interpolation (Phong when forced on for an unlit mode).
+
+    shadows: {light index: ShadowMap} for the lights that cast shadows. Shading is linear in the lights, so
+    each of those lights is shaded on its own and weighted per pixel by how lit the pixel is; the other
+    lights are shaded together as before."""
     mats = scene.materials
     one = len(set(map(id, mats))) == 1
     per_face = mats[0] if one else (mats, geo.face_mesh)
     per_vert = mats[0] if one else (mats, geo.vert_mesh)
-    if mode == "flat":
-        return flat_shading(geo.mesh, frags, scene.camera, scene.lights, per_face, base)
-    if mode == "gouraud":
-        return gouraud_shading(geo.mesh, frags, scene.camera, scene.lights, per_vert, base, vert_normals)
-    return phong_shading(geo.mesh, frags, scene.camera, scene.lights, per_face, base, vert_normals)[0]
+
+    def lit(lights):
+        if mode == "flat":
+            return flat_shading(geo.mesh, frags, scene.camera, lights, per_face, base)
+        if mode == "gouraud":
+            return gouraud_shading(geo.mesh, frags, scene.camera, lights, per_vert, base, vert_normals)
+        return phong_shading(geo.mesh, frags, scene.camera, lights, per_face, base, vert_normals)[0]
+
+    if not shadows:
+        return lit(scene.lights)
+    color = lit([l for k, l in enumerate(scene.lights) if k not in shadows])
+    points = interpolate(geo.mesh.verts, frags, geo.mesh.faces).detach()   # (..., 3) world
+    normals = geo.mesh.face_normals().detach()[frags.face_id.clamp_min(0)]  # geometric: for the slope bias
+    for k, light_map in shadows.items():
+        visible = shadow_factor(points.reshape(-1, 3), normals.reshape(-1, 3), light_map,
+                                pcf=pcf).view(points.shape[:-1])
+        color = color + visible[..., None].to(color.dtype) * lit([scene.lights[k]])
+    return color
+
+
+def _casters(lights) -> list:
+    """Indices of the lights that cast shadows (directional and point lights with ``cast_shadows``)."""
+    return [k for k, l in enumerate(lights)
+            if isinstance(l, (DirectionalLight, PointLight)) and getattr(l, "cast_shadows", False)]
+
+
+def _shadow_maps(scene, geo, settings, passes) -> dict:
+    """{light index: ShadowMap} for the lights that cast shadows, when the shadow pass runs."""
+    if "shadow_maps" not in passes:
+        return {}
+    return {k: shadow_map(geo.mesh, scene.lights[k], settings.shadow_resolution) for k in _casters(scene.lights)}
 
 
 def _depth_range(frags):
@@ -352,7 +399,8 @@ def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
         ran = tuple(p for p in passes if p in ("join", "cull_backfaces", "rasterize", "autograd"))
         empty = torch.zeros(*frags.shape, 3, dtype=geo.mesh.verts.dtype, device=geo.mesh.verts.device)
         return _result(_composite(empty, frags, scene.background, settings), frags, None, settings, ran)
-    color, pixel_normals = _shade(scene, geo, frags, settings, passes)
+    shadows = _shadow_maps(scene, geo, settings, passes)                    # before lighting, once per light
+    color, pixel_normals = _shade(scene, geo, frags, settings, passes, shadows=shadows)
     wire = lambda img: wireframe_overlay(img, geo.mesh, frags, scene.camera, settings.wireframe_width,
                                          settings.wireframe_color)
     if "wireframe" in passes:
@@ -360,18 +408,20 @@ def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
     image = _composite(color, frags, scene.background, settings)            # (H, W, 3)
     silhouette = frags.mask.to(image.dtype)
     if "supersample" in passes:
-        image, silhouette, ran = _supersample(scene, geo, frags, settings, passes, image, silhouette)
+        image, silhouette, ran = _supersample(scene, geo, frags, settings, passes, image, silhouette, shadows)
         passes = tuple(p for p in passes if p in ran or p not in ("detect_edges", "supersample"))
         if "wireframe" in passes and "supersample" in ran:                  # lines over the filtered image
             image = wire(image).clamp(0, 1) if settings.clamp else wire(image)
     return _result(image, frags, pixel_normals, settings, passes, silhouette)
 
 
-def _shade(scene, geo, frags, settings, passes, depth_range=None, spacing=1.0):
-    """The colour of every fragment, (..., 3), and per-pixel normals when asked for; any fragments shape."""
+def _shade(scene, geo, frags, settings, passes, depth_range=None, spacing=1.0, shadows=None):
+    """The colour of every fragment, (..., 3), and per-pixel normals when asked for; any fragments shape.
+    shadows: the shadow maps of the lights that cast shadows ({light index: ShadowMap})."""
     material_color, base = _base_color(scene, geo, frags, settings, passes, spacing)   # texture / vertex colours
     vert_normals, pixel_normals = _normals(scene, geo, frags, settings, passes)
-    lit = _light(scene, geo, frags, settings.shading, base, vert_normals) if "lighting" in passes else None
+    lit = _light(scene, geo, frags, settings.shading, base, vert_normals, shadows,
+                 settings.shadow_pcf) if "lighting" in passes else None
     return _pick_color(settings.shading, scene, frags, material_color, base, lit, pixel_normals,
                        depth_range), pixel_normals
 
@@ -384,7 +434,7 @@ def _edge_keys(geo, settings) -> torch.Tensor:
     return geo.face_mesh
 
 
-def _supersample(scene, geo, frags, settings, passes, image, silhouette):
+def _supersample(scene, geo, frags, settings, passes, image, silhouette, shadows=None):
     """Replace pixels of the one-sample image by the box filter of k x k samples: all of them, or (adaptive)
     those a discontinuity touches. Returns the image, the silhouette (covered fraction) and the passes run."""
     from course.antialias import discontinuity_pixels, resolve, sample_fragments
@@ -402,7 +452,7 @@ def _supersample(scene, geo, frags, settings, passes, image, silhouette):
     sf = sample_fragments(geo.mesh, scene.camera, k, jitter=settings.jitter, seed=settings.seed, pixels=pixels,
                           cull_backfaces=settings.cull_backfaces)           # (P, S)
     if sf.mask.any():
-        color, _ = _shade(scene, geo, sf, settings, passes, _depth_range(frags), 1 / k)
+        color, _ = _shade(scene, geo, sf, settings, passes, _depth_range(frags), 1 / k, shadows)
     else:
         color = torch.zeros(*sf.shape, 3, dtype=image.dtype, device=image.device)
     value = resolve(_composite(color, sf, scene.background, settings))      # (P, 3)

@@ -69,6 +69,7 @@ class DirectionalLight:
     direction: Color = (0.0, -1.0, 0.0)
     color: Color = (1.0, 1.0, 1.0)
     intensity: float = 1.0
+    cast_shadows: bool = True        # used when render() draws shadows (RenderSettings.shadows)
 
     def incident(self, points_world: torch.Tensor):
         """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
@@ -88,6 +89,7 @@ class PointLight:
     color: Color = (1.0, 1.0, 1.0)
     intensity: float = 1.0
     falloff: bool = True
+    cast_shadows: bool = True        # used when render() draws shadows (RenderSettings.shadows)
 
     def incident(self, points_world: torch.Tensor):
         """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
