@@ -552,6 +552,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="none (one sample per pixel, the default), supersample (k x k samples in every pixel) or "
                         "adaptive (k x k only where an edge crosses the pixel)")
     p.add_argument("--samples", type=int, default=4, metavar="K", help="samples per axis when antialiasing (4)")
+    p.add_argument("--shadows", default="none", choices=SHADOW_MODES,
+                   help="none (default) or map: shadow maps for the default key light")
     p.add_argument("--texture-filter", default="bilinear", choices=TEXTURE_FILTERS,
                    help="texture lookup: nearest, bilinear (default) or trilinear (mipmaps)")
     p.add_argument("--background", nargs=3, type=float, default=(1.0, 1.0, 1.0), metavar=("R", "G", "B"),
@@ -603,7 +605,7 @@ def cli(argv: list[str]) -> int:
         scene = Scene(mesh, camera, lights=default_lights(), background=args.background)
         result = render(scene, RenderSettings(shading=args.shading, wireframe=args.wireframe,
                                               antialias=args.antialias, samples=args.samples,
-                                              texture_filter=args.texture_filter))
+                                              texture_filter=args.texture_filter, shadows=args.shadows))
         _save_png(result.image, args.out)
     except (ValueError, TypeError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
