@@ -3,7 +3,8 @@
 ::
 
     plan ─▶ join meshes ─▶ rasterize (cull) ─▶ base colour (texture / vertex colours / material)
-         ─▶ normals ─▶ shadow maps (lights that cast shadows) ─▶ lighting (flat | Gouraud | Phong)
+         ─▶ normals ─▶ shadow maps or a BVH for shadow rays (lights that cast shadows)
+         ─▶ lighting (flat | Gouraud | Phong)
          ─▶ composite over the background
          ─▶ antialias: detect edge pixels, shade k × k samples there (or everywhere), box-filter ─▶ wireframe
 
@@ -39,8 +40,10 @@ from course.mesh import Mesh
 from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.shading import (
     AmbientLight, DirectionalLight, Material, PointLight, flat_shading, gouraud_shading, mip_pyramid, normalize,
-    phong_shading, sample_texture, sample_texture_mip, uv_derivatives, wireframe_overlay,
+    phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions, wireframe_overlay,
 )
+from course.raytrace import BVH
+from course.raytrace import visible as ray_visible
 from course.shadows import shadow_factor, shadow_map
 from course.tensors import as_tensor
 
@@ -52,7 +55,7 @@ LIT_MODES = ("phong", "gouraud", "flat")
 COLOR_MODES = LIT_MODES + ("unlit",)                       # modes that show textures and vertex colours
 FORCEABLE = ("normals", "lighting", "texture", "autograd")
 ANTIALIAS_MODES = ("none", "supersample", "adaptive")
-SHADOW_MODES = ("none", "map")
+SHADOW_MODES = ("none", "map", "rays")
 TEXTURE_FILTERS = ("bilinear", "nearest", "trilinear")
 
 
@@ -127,10 +130,11 @@ class RenderSettings:
     jitter: stratified jittered samples instead of a regular grid, from a hash of (``seed``, pixel, sample).
     With antialiasing the image and the silhouette are box-filtered (each sample clamped, then averaged);
     depth and normals come from the pixel centres, and the wireframe is drawn over the filtered image.
-    shadows: ``"none"``, or ``"map"`` (lectures 06: a shadow map per light whose ``cast_shadows`` is set,
-    ``shadow_resolution`` texels a side, ``shadow_pcf`` × ``shadow_pcf`` percentage-closer filtering). A
-    light's direct contribution (diffuse and highlight) is weighted per pixel by how lit the pixel is;
-    ambient light is never shadowed.
+    shadows: ``"none"``, ``"map"`` (lecture 06: a shadow map per light whose ``cast_shadows`` is set,
+    ``shadow_resolution`` texels a side, ``shadow_pcf`` × ``shadow_pcf`` percentage-closer filtering) or
+    ``"rays"`` (lecture 07: a shadow ray per pixel and light through a BVH of the scene). A light's direct
+    contribution (diffuse and highlight) is weighted per pixel by how lit the pixel is; ambient light is
+    never shadowed.
     """
     shading: str = "phong"
     texture_filter: str = "bilinear"
@@ -217,6 +221,7 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
         "vertex_colors": mode in COLOR_MODES and any(m.vert_colors is not None for m in scene.meshes),
         "normals": lit or mode == "normals" or settings.return_normals,
         "shadow_maps": lit and settings.shadows == "map" and _casters(scene.lights) != [],
+        "shadow_rays": lit and settings.shadows == "rays" and _casters(scene.lights) != [],
         "lighting": lit,
         "detect_edges": settings.antialias == "adaptive",                 # lecture 05: after shading the
         "supersample": settings.antialias != "none",                      # centres, refine edge pixels
@@ -306,9 +311,9 @@ def _pixel_normals(geo, frags, vert_normals, flat: bool) -> torch.Tensor:
 def _light(scene, geo, frags, mode, base, vert_normals, shadows=None, pcf: int = 1) -> torch.Tensor:
     """(H, W, 3) lit colour with the mode's interpolation (Phong when forced on for an unlit mode).
 
-    shadows: {light index: ShadowMap} for the lights that cast shadows. Shading is linear in the lights, so
-    each of those lights is shaded on its own and weighted per pixel by how lit the pixel is; the other
-    lights are shaded together as before."""
+    shadows: {light index: ShadowMap or BVH} for the lights that cast shadows. Shading is linear in the
+    lights, so each of those lights is shaded on its own and weighted per pixel by how lit the pixel is (its
+    shadow map, or shadow rays through the BVH); the other lights are shaded together as before."""
     mats = scene.materials
     one = len(set(map(id, mats))) == 1
     per_face = mats[0] if one else (mats, geo.face_mesh)
@@ -326,9 +331,18 @@ def _light(scene, geo, frags, mode, base, vert_normals, shadows=None, pcf: int =
     color = lit([l for k, l in enumerate(scene.lights) if k not in shadows])
     points = interpolate(geo.mesh.verts, frags, geo.mesh.faces).detach()   # (..., 3) world
     normals = geo.mesh.face_normals().detach()[frags.face_id.clamp_min(0)]  # geometric: for the slope bias
-    for k, light_map in shadows.items():
-        visible = shadow_factor(points.reshape(-1, 3), normals.reshape(-1, 3), light_map,
-                                pcf=pcf).view(points.shape[:-1])
+    for k, occluders in shadows.items():
+        if isinstance(occluders, BVH):                                      # the side the camera sees
+            toward = view_directions(points, scene.camera)
+            n = torch.where(((normals * toward).sum(-1, keepdim=True) < 0), -normals, normals)
+            light = scene.lights[k]
+            directional = isinstance(light, DirectionalLight)
+            target = light.direction if directional else light.position
+            visible = ray_visible(points.reshape(-1, 3), target, occluders, directional=directional,
+                                  normals=n.reshape(-1, 3)).to(points.dtype).view(points.shape[:-1])
+        else:
+            visible = shadow_factor(points.reshape(-1, 3), normals.reshape(-1, 3), occluders,
+                                    pcf=pcf).view(points.shape[:-1])
         color = color + visible[..., None].to(color.dtype) * lit([scene.lights[k]])
     return color
 
@@ -340,10 +354,15 @@ def _casters(lights) -> list:
 
 
 def _shadow_maps(scene, geo, settings, passes) -> dict:
-    """{light index: ShadowMap} for the lights that cast shadows, when the shadow pass runs."""
-    if "shadow_maps" not in passes:
-        return {}
-    return {k: shadow_map(geo.mesh, scene.lights[k], settings.shadow_resolution) for k in _casters(scene.lights)}
+    """{light index: ShadowMap, or the scene's BVH for shadow rays} for the lights that cast shadows, when a
+    shadow pass runs."""
+    if "shadow_maps" in passes:
+        return {k: shadow_map(geo.mesh, scene.lights[k], settings.shadow_resolution)
+                for k in _casters(scene.lights)}
+    if "shadow_rays" in passes:
+        bvh = BVH(geo.mesh)                                                 # one BVH for every light
+        return {k: bvh for k in _casters(scene.lights)}
+    return {}
 
 
 def _depth_range(frags):
@@ -553,7 +572,7 @@ def _parser() -> argparse.ArgumentParser:
                         "adaptive (k x k only where an edge crosses the pixel)")
     p.add_argument("--samples", type=int, default=4, metavar="K", help="samples per axis when antialiasing (4)")
     p.add_argument("--shadows", default="none", choices=SHADOW_MODES,
-                   help="none (default) or map: shadow maps for the default key light")
+                   help="none (default), map (shadow maps) or rays (shadow rays through a BVH) for the key light")
     p.add_argument("--texture-filter", default="bilinear", choices=TEXTURE_FILTERS,
                    help="texture lookup: nearest, bilinear (default) or trilinear (mipmaps)")
     p.add_argument("--background", nargs=3, type=float, default=(1.0, 1.0, 1.0), metavar=("R", "G", "B"),

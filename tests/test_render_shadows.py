@@ -56,7 +56,29 @@ def test_unoccluded_light_gives_the_unshadowed_image(shading):
                                     PointLight(position=(0.0, 2.0, 0.0), intensity=2.0)))
     a = render(sc, RenderSettings(shading=shading)).image
     b = render(sc, RenderSettings(shading=shading, shadows="map", shadow_resolution=128, shadow_pcf=3)).image
+    c = render(sc, RenderSettings(shading=shading, shadows="rays")).image
     torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+    torch.testing.assert_close(a, c, atol=1e-6, rtol=0)
+
+
+def test_shadow_maps_and_shadow_rays_agree_away_from_the_outline():
+    """The same scene, the same shading: a 1024² shadow map and exact shadow rays differ only along the
+    shadow's outline (the map's texels), on a small fraction of the pixels."""
+    from course.models import teapot
+    pot = teapot(4, dtype=F64)
+    ground = plane(3.0, 1, dtype=F64)
+    ground = Mesh(ground.verts + torch.tensor([0.0, float(pot.verts[:, 1].min()), 0.0], dtype=F64), ground.faces)
+    cam = Camera.look_at((1.5, 2.0, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=64, height=64).to(dtype=F64)
+    for light in (DirectionalLight(direction=(0.5, -1.0, -0.3)), PointLight(position=(1.0, 2.0, 0.5), intensity=4.0)):
+        sc = Scene([pot, ground], cam, lights=(AmbientLight(intensity=0.2), light))
+        none = render(sc, RenderSettings(clamp=False)).image
+        by_map = render(sc, RenderSettings(shadows="map", clamp=False))
+        by_rays = render(sc, RenderSettings(shadows="rays", clamp=False))
+        assert "shadow_rays" in by_rays.passes and "shadow_maps" not in by_rays.passes
+        shadowed = (none - by_rays.image).sum(-1) > 0.05
+        assert shadowed.float().mean() > 0.03                               # the pot shadows the ground
+        differ = (by_map.image - by_rays.image).abs().sum(-1) > 0.05
+        assert differ.float().mean() < 0.25 * shadowed.float().mean()
 
 
 def test_shadow_pass_skipped_where_not_needed():
@@ -76,6 +98,7 @@ def test_shadow_pass_skipped_where_not_needed():
 def test_bad_shadow_settings():
     with pytest.raises(ValueError, match="shadows must be one of"):
         RenderSettings(shadows="soft")
+    assert RenderSettings(shadows="rays").shadows == "rays"
     with pytest.raises(ValueError, match="shadow_pcf"):
         RenderSettings(shadows="map", shadow_pcf=2)
     with pytest.raises(ValueError, match="shadow_resolution"):

@@ -1,0 +1,616 @@
+"""Ray tracing: ray–triangle tests, a BVH, ``raycast`` → Fragments, shadow rays and area lights (lecture 07).
+
+Rasterization asks "which pixels does this triangle cover?"; ray tracing asks the transposed question,
+"which triangle does this ray hit first?". Both answer with the same ``Fragments``, so every shader works on
+both, and ``raycast`` takes its barycentrics and depth from the very function ``rasterize`` uses
+(``raster._surface_at``): the two visibility stages hand identical, differentiable inputs to shading.
+
+**Ray–triangle.** ``intersect_triangles`` is the watertight test of Woop, Benthin and Wald (2013). Each ray
+is turned into the +z axis by a permutation of the axes (z = the largest component of the direction) and a
+shear; the triangle, translated to the ray origin, is projected along z, and the ray hits when the origin
+(0, 0) lies inside the projected triangle. Inside-ness is three 2-D edge functions U, V, W. An edge shared
+by two triangles gives bit-identical values of opposite sign in both (the same products of the same sheared
+vertex coordinates), so a ray can not slip through the crack between them; an edge function that rounds to
+exactly 0 in float32 is recomputed in float64, where the product difference is exact. The textbook
+Möller–Trumbore test (``moller_trumbore``) computes each triangle's barycentrics with its own rounding
+and does leak: rays aimed at a shared edge can miss both triangles (``tests/test_raytrace.py`` finds some).
+
+**The BVH** (bounding volume hierarchy) is a binary tree of axis-aligned boxes; a ray skips every subtree
+whose box it misses. ``BVH(mesh)`` builds a *linear* BVH (LBVH, Lauterbach et al. 2009, Karras 2012)
+without a Python loop per node:
+
+1. every triangle's centroid gets a 63-bit Morton code (21 bits per axis, interleaved): sorting by it
+   lays the triangles out along a Z-order space-filling curve, so nearby triangles sit nearby in memory;
+2. the root owns the whole sorted range; level by level, every range of more than ``leaf_size``
+   triangles is split where its highest differing Morton bit flips (one ``searchsorted`` for the whole
+   level) — that is a spatial median split on an octree plane; ranges of identical codes split in half;
+3. boxes are reduced bottom-up: leaves by one ``scatter_reduce`` (amin / amax) over their triangles,
+   then each level's internal nodes from their two children.
+
+Nodes are numbered breadth-first and the two children of a node are consecutive (``left``, ``left + 1``).
+The flat tensors: ``boxes`` (M, 2, 3) min and max corners, ``left`` (M,) first child (-1 for a leaf),
+``first`` / ``count`` (M,) the leaf's range in ``order`` (count 0 for internal nodes), ``order`` (F,) the
+face id of each sorted slot, ``tris`` (F, 3, 3) the sorted triangles.
+
+**Traversal of many rays at once** (``BVH.intersect``). The state is a frontier of (ray, node) pairs, all
+processed together per step: leaf pairs expand to (ray, triangle) candidates that go through the watertight
+test, and each ray keeps its closest hit with a ``scatter_reduce`` amin on t (ties go to the lower face id);
+internal pairs expand to their two children, which are kept when the ray's segment [t_min, best t] meets the
+child's box (the slab test). The frontier empties after about as many steps as the tree is deep. Rays whose
+frontier is empty are finished and drop out by themselves; with ``any_hit`` a ray's pairs are dropped at its
+first hit (enough for shadows). Rays are processed in chunks so memory stays bounded.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from .raster import Fragments, _check_inputs, _surface_at
+from .tensors import as_tensor
+
+__all__ = ["intersect_triangles", "moller_trumbore", "morton_codes", "BVH", "Hits", "raycast", "visible",
+           "rectangle_light_samples", "disk_light_samples"]
+
+
+# ---------------------------------------------------------------------------------------- input checks
+
+def _rays_and_tris(origins, directions, tris):
+    o = as_tensor(origins, name="origins")
+    dtype = torch.promote_types(o.dtype, as_tensor(directions, name="directions").dtype)
+    tris = as_tensor(tris, name="tris")
+    dtype = torch.promote_types(dtype, tris.dtype)
+    o = o.to(dtype)
+    d = as_tensor(directions, dtype=dtype, device=o.device, name="directions")
+    tris = tris.to(dtype=dtype, device=o.device)
+    if o.dim() != 2 or o.shape[1] != 3 or d.shape != o.shape:
+        raise ValueError(f"origins and directions must both have shape (N, 3), got {tuple(o.shape)} and "
+                         f"{tuple(d.shape)}")
+    if tris.shape != (o.shape[0], 3, 3):
+        raise ValueError(f"tris must have shape (N, 3, 3) with N = {o.shape[0]}, got {tuple(tris.shape)}")
+    return o, d, tris
+
+
+# ------------------------------------------------------------------------------------ ray–triangle tests
+
+def _watertight(o, d, v0, v1, v2):
+    """The watertight test on (N,) pairs: o, d, v0, v1, v2 (N, 3). Returns t (N,), bary (N, 3), hit (N,)."""
+    dtype = o.dtype
+    kz = d.abs().argmax(1)                                                  # the dominant axis becomes z
+    kx, ky = (kz + 1) % 3, (kz + 2) % 3
+    flip = d.gather(1, kz[:, None])[:, 0] < 0                               # keep the winding: swap x and y
+    kx, ky = torch.where(flip, ky, kx), torch.where(flip, kx, ky)
+    perm = torch.stack([kx, ky, kz], 1)                                     # (N, 3)
+    dp = d.gather(1, perm)
+    dz = torch.where(dp[:, 2] == 0, torch.ones_like(dp[:, 2]), dp[:, 2])    # d = 0: no ray, a miss below
+    sx, sy, sz = dp[:, 0] / dz, dp[:, 1] / dz, 1 / dz                       # the shear
+    A, B, C = ((v - o).gather(1, perm) for v in (v0, v1, v2))               # vertices relative to the origin
+    ax, ay = A[:, 0] - sx * A[:, 2], A[:, 1] - sy * A[:, 2]                 # sheared, projected along z
+    bx, by = B[:, 0] - sx * B[:, 2], B[:, 1] - sy * B[:, 2]
+    cx, cy = C[:, 0] - sx * C[:, 2], C[:, 1] - sy * C[:, 2]
+    U, V, W = cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax       # edge functions: weights of v0, v1, v2
+    if dtype != torch.float64:
+        # an edge function that rounded to exactly 0 decides nothing: redo all three in float64, where the
+        # difference of two products of float32 numbers is exact (Woop et al., section 3.4)
+        U, V, W = U.double(), V.double(), W.double()
+        zero = ((U == 0) | (V == 0) | (W == 0)).nonzero().squeeze(1)
+        if zero.numel():
+            g = [q.index_select(0, zero).double() for q in (ax, ay, bx, by, cx, cy)]
+            U[zero] = g[4] * g[3] - g[5] * g[2]
+            V[zero] = g[0] * g[5] - g[1] * g[4]
+            W[zero] = g[2] * g[1] - g[3] * g[0]
+    neg = (U < 0) | (V < 0) | (W < 0)
+    pos = (U > 0) | (V > 0) | (W > 0)
+    det = U + V + W
+    hit = ~(neg & pos) & (det != 0) & (dp[:, 2] != 0)                       # all >= 0 or all <= 0
+    az, bz, cz = sz * A[:, 2], sz * B[:, 2], sz * C[:, 2]
+    T = U * az.to(U.dtype) + V * bz.to(U.dtype) + W * cz.to(U.dtype)
+    safe = torch.where(det == 0, torch.ones_like(det), det)
+    t = torch.where(hit, T / safe, torch.full_like(T, math.inf))
+    bary = torch.where(hit[:, None], torch.stack([U, V, W], 1) / safe[:, None], torch.zeros_like(safe)[:, None])
+    hit &= torch.isfinite(t)
+    return t.to(dtype), bary.to(dtype), hit
+
+
+def intersect_triangles(origins, directions, tris):
+    """The watertight ray–triangle test (Woop, Benthin and Wald 2013), one triangle per ray.
+
+    origins, directions: (N, 3) (directions need not be unit; t is in their units); tris: (N, 3, 3) the
+    triangle tested against each ray. Returns ``t`` (N,) ray parameter of the hit (``o + t d``, +inf on a
+    miss; negative t is a hit behind the origin, filter it yourself), ``bary`` (N, 3) weights of the hit
+    point on (v0, v1, v2) (0 on a miss) and ``hit`` (N,) bool. Both windings hit (no culling). A ray
+    through a shared edge or vertex of a closed mesh hits at least one of the triangles there; a ray in
+    the plane of a triangle misses it.
+    """
+    o, d, tris = _rays_and_tris(origins, directions, tris)
+    return _watertight(o, d, tris[:, 0], tris[:, 1], tris[:, 2])
+
+
+def moller_trumbore(origins, directions, tris):
+    """The textbook Möller–Trumbore test (1997), same arguments and results as ``intersect_triangles``.
+
+    Barycentrics by Cramer's rule: ``u = (T · (d × e2)) / det``, ``v = (d · (T × e1)) / det`` with
+    ``T = o - v0``, ``e1 = v1 - v0``, ``e2 = v2 - v0``, ``det = e1 · (d × e2)``. Each triangle rounds its
+    own u and v, so along an edge shared by two triangles both can reject the ray: it is not watertight.
+    """
+    o, d, tris = _rays_and_tris(origins, directions, tris)
+    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    p = torch.linalg.cross(d, e2)
+    det = (e1 * p).sum(1)
+    safe = torch.where(det == 0, torch.ones_like(det), det)
+    T = o - v0
+    u = (T * p).sum(1) / safe
+    q = torch.linalg.cross(T, e1)
+    v = (d * q).sum(1) / safe
+    t = (e2 * q).sum(1) / safe
+    hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    t = torch.where(hit, t, torch.full_like(t, math.inf))
+    bary = torch.where(hit[:, None], torch.stack([1 - u - v, u, v], 1), torch.zeros_like(t)[:, None])
+    return t, bary, hit
+
+
+# ----------------------------------------------------------------------------------------------- the BVH
+
+def _spread_bits(x):
+    """Spread the low 21 bits of x (int64) to every third bit: b20..b0 → b20 0 0 b19 0 0 ... b0."""
+    x = x & 0x1FFFFF
+    x = (x | (x << 32)) & 0x1F00000000FFFF
+    x = (x | (x << 16)) & 0x1F0000FF0000FF
+    x = (x | (x << 8)) & 0x100F00F00F00F00F
+    x = (x | (x << 4)) & 0x10C30C30C30C30C3
+    x = (x | (x << 2)) & 0x1249249249249249
+    return x
+
+
+def morton_codes(points):
+    """63-bit Morton codes (int64) of points (N, 3), quantised to 2^21 cells per axis of their bounding box."""
+    p = points.double()
+    lo, hi = p.min(0).values, p.max(0).values
+    scale = torch.where(hi > lo, (2**21 - 1) / (hi - lo), torch.zeros_like(hi))
+    q = ((p - lo) * scale).long().clamp(0, 2**21 - 1)                     # (N, 3)
+    return (_spread_bits(q[:, 0]) << 2) | (_spread_bits(q[:, 1]) << 1) | _spread_bits(q[:, 2])
+
+
+def _highest_bit(x):
+    """Index of the highest set bit of positive int64 x (binary search with shifts, exact for every value)."""
+    bit = torch.zeros_like(x)
+    for s in (32, 16, 8, 4, 2, 1):
+        up = (x >> (bit + s)) != 0
+        bit = bit + s * up.long()
+    return bit
+
+
+@dataclass
+class Hits:
+    """Result of ``BVH.intersect`` for N rays.
+
+    face_id: (N,) int64, the face hit (the closest one; any one with ``any_hit``), -1 on a miss.
+    t:       (N,) ray parameter of the hit point ``o + t d``, +inf on a miss.
+    bary:    (N, 3) barycentric weights of the hit point on the face's (v0, v1, v2), 0 on a miss.
+    """
+    face_id: torch.Tensor
+    t: torch.Tensor
+    bary: torch.Tensor
+
+    @property
+    def hit(self) -> torch.Tensor:
+        """(N,) bool, True where the ray hit a face."""
+        return self.face_id >= 0
+
+
+class BVH:
+    """A linear BVH over a triangle mesh (see the module docstring), built vectorised in torch.
+
+    mesh: anything with ``verts`` (V, 3) and ``faces`` (F, 3) (detached: the BVH answers which face, not
+    how the hit moves). leaf_size: most triangles per leaf. Attributes: ``boxes`` (M, 2, 3) min / max
+    corner of each node, ``left`` (M,) int64 first child (the second is ``left + 1``; -1 for a leaf),
+    ``first`` and ``count`` (M,) int64 the leaf's slots in ``order`` (count 0 for internal nodes),
+    ``order`` (F,) int64 face id of each slot, ``tris`` (F, 3, 3) the triangles in slot order, ``depth``
+    the number of levels, ``bounds`` (2, 3) the scene's box (the root's).
+    """
+
+    def __init__(self, mesh, *, leaf_size: int = 4):
+        verts, faces = getattr(mesh, "verts", None), getattr(mesh, "faces", None)
+        if not isinstance(verts, torch.Tensor) or verts.dim() != 2 or verts.shape[1] != 3:
+            raise ValueError(f"mesh.verts must be a (V, 3) tensor, got {getattr(verts, 'shape', type(verts))}")
+        if not isinstance(faces, torch.Tensor) or faces.dim() != 2 or faces.shape[1] != 3:
+            raise ValueError(f"mesh.faces must be an (F, 3) tensor, got {getattr(faces, 'shape', type(faces))}")
+        if int(leaf_size) < 1:
+            raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
+        verts = verts.detach()
+        if not verts.is_floating_point():
+            verts = verts.to(torch.get_default_dtype())
+        if not torch.isfinite(verts).all():
+            raise ValueError("mesh.verts contains NaN or inf")
+        faces = faces.long()
+        if faces.numel() and (int(faces.min()) < 0 or int(faces.max()) >= verts.shape[0]):
+            raise ValueError("mesh.faces index vertices out of range")
+        self.leaf_size = int(leaf_size)
+        self.dtype, self.device = verts.dtype, verts.device
+        F = faces.shape[0]
+        tris = verts[faces]                                                 # (F, 3, 3)
+        if F == 0:
+            z = torch.zeros(0, dtype=torch.int64, device=self.device)
+            self.boxes, self.left, self.first, self.count = verts.new_zeros((0, 2, 3)), z, z, z
+            self.order, self.tris, self.depth, self._slot = z, tris, 0, z
+            self.bounds = verts.new_zeros((2, 3))
+            return
+        codes = morton_codes(tris.mean(1))
+        codes, order = torch.sort(codes, stable=True)
+        self.order, self.tris = order, tris[order]
+        self._build(codes)
+
+    def _build(self, codes):
+        """The topology, level by level, then the boxes bottom-up."""
+        F, dev = codes.shape[0], codes.device
+        lo, hi = torch.zeros(1, dtype=torch.int64, device=dev), torch.full((1,), F, dtype=torch.int64, device=dev)
+        node_lo, node_hi, left, level_start = [lo], [hi], [], [0]
+        n_nodes = 1
+        while True:
+            split_me = (hi - lo) > self.leaf_size                           # (L,) internal nodes of this level
+            child = torch.full_like(lo, -1)
+            k = split_me.nonzero().squeeze(1)
+            if k.numel():
+                child[k] = n_nodes + 2 * torch.arange(k.numel(), device=dev)
+            left.append(child)
+            if not k.numel():
+                break
+            a, b = lo[k], hi[k]
+            ca, cb = codes[a], codes[b - 1]
+            diff = ca ^ cb
+            bit = _highest_bit(diff.clamp_min(1))
+            first_set = ((ca >> bit) | 1) << bit                            # common prefix, then the bit set
+            split = torch.searchsorted(codes, first_set)
+            split = torch.where(diff == 0, (a + b) // 2, split)             # identical codes: halve the range
+            lo = torch.stack([a, split], 1).reshape(-1)                     # children, left then right
+            hi = torch.stack([split, b], 1).reshape(-1)
+            level_start.append(n_nodes)
+            n_nodes += lo.numel()
+            node_lo.append(lo), node_hi.append(hi)
+        lo, hi, self.left = torch.cat(node_lo), torch.cat(node_hi), torch.cat(left)
+        leaf = self.left < 0
+        self.first = torch.where(leaf, lo, torch.zeros_like(lo))
+        self.count = torch.where(leaf, hi - lo, torch.zeros_like(lo))
+        self.depth = len(level_start)
+        # boxes: leaves from their triangles (one scatter), then internal nodes level by level, deepest first
+        leaves = leaf.nonzero().squeeze(1)
+        counts = self.count[leaves]
+        slots = torch.repeat_interleave(lo[leaves], counts) + _ranks(counts)   # every slot, leaf by leaf
+        slot_leaf = torch.empty(F, dtype=torch.int64, device=dev)           # the leaf owning each slot
+        slot_leaf[slots] = torch.repeat_interleave(leaves, counts)
+        M = lo.numel()
+        boxes_min = torch.full((M, 3), math.inf, dtype=self.dtype, device=dev)
+        boxes_max = torch.full((M, 3), -math.inf, dtype=self.dtype, device=dev)
+        idx = slot_leaf[:, None].expand(-1, 3)
+        boxes_min.scatter_reduce_(0, idx, self.tris.amin(1), reduce="amin")
+        boxes_max.scatter_reduce_(0, idx, self.tris.amax(1), reduce="amax")
+        for s, e in reversed(list(zip(level_start, level_start[1:] + [M]))):
+            nodes = torch.arange(s, e, device=dev)
+            nodes = nodes[self.left[nodes] >= 0]
+            if nodes.numel():
+                c = self.left[nodes]
+                boxes_min[nodes] = torch.minimum(boxes_min[c], boxes_min[c + 1])
+                boxes_max[nodes] = torch.maximum(boxes_max[c], boxes_max[c + 1])
+        self.boxes = torch.stack([boxes_min, boxes_max], 1)                 # (M, 2, 3)
+        self.bounds = self.boxes[0]
+        self._slot = torch.empty_like(self.order)
+        self._slot[self.order] = torch.arange(F, device=dev)                # slot of each face id
+
+    @property
+    def num_nodes(self) -> int:
+        return self.boxes.shape[0]
+
+    # ------------------------------------------------------------------------------------- traversal
+
+    def intersect(self, origins, directions, *, t_min=0.0, t_max=math.inf, any_hit: bool = False,
+                  chunk: int = 1 << 16) -> Hits:
+        """The closest hit of every ray (or any hit, ``any_hit=True``) with t in [t_min, t_max].
+
+        origins, directions: (N, 3) world space (directions need not be unit: t is in their units);
+        t_min, t_max: floats or (N,) tensors. Computed in the promoted dtype of the rays and the mesh.
+        Ties in t go to the lower face id. Returns ``Hits`` (face_id (N,), t (N,), bary (N, 3)).
+        """
+        o = as_tensor(origins, name="origins")
+        d = as_tensor(directions, name="directions")
+        dtype = torch.promote_types(torch.promote_types(o.dtype, d.dtype), self.dtype)
+        o, d = o.to(dtype=dtype, device=self.device), d.to(dtype=dtype, device=self.device)
+        if o.dim() != 2 or o.shape[1] != 3 or d.shape != o.shape:
+            raise ValueError(f"origins and directions must both have shape (N, 3), got {tuple(o.shape)} and "
+                             f"{tuple(d.shape)}")
+        if not (torch.isfinite(o).all() and torch.isfinite(d).all()):
+            raise ValueError("origins and directions must be finite")
+        N = o.shape[0]
+        t_lo = _per_ray(t_min, N, o, "t_min")
+        t_hi = _per_ray(t_max, N, o, "t_max")
+        face = torch.full((N,), -1, dtype=torch.int64, device=self.device)
+        t = torch.full((N,), math.inf, dtype=dtype, device=self.device)
+        bary = torch.zeros((N, 3), dtype=dtype, device=self.device)
+        if self.num_nodes == 0 or N == 0:
+            return Hits(face, t, bary)
+        boxes, tris = self.boxes.to(dtype), self.tris.to(dtype)
+        for s in range(0, N, chunk):
+            sl = slice(s, min(s + chunk, N))
+            f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], boxes, tris, any_hit)   # face hit
+            ok = (f >= 0).nonzero().squeeze(1)
+            if ok.numel():                                                 # the winners' t and bary, once more
+                r = ok + s
+                tw, bw, _ = _watertight(o[r], d[r], *tris[self._slot[f[ok]]].unbind(1))
+                face[r], t[r], bary[r] = f[ok], tw, bw
+        return Hits(face, t, bary)
+
+    def _traverse(self, o, d, t_lo, t_hi, boxes, tris, any_hit):
+        """The frontier loop for one chunk of rays. Returns the face hit per ray (-1 on a miss).
+
+        The frontier holds (ray, node) pairs whose box the ray's segment meets. Each step tests the leaves
+        among them and replaces each internal node by those of its two children that the ray still meets.
+        """
+        n, dev = o.shape[0], o.device
+        inv = 1 / d                                                         # ±inf where a component is 0
+        best = t_hi.clone()                                                 # the closest hit so far
+        none = torch.iinfo(torch.int64).max
+        best_face = torch.full((n,), none, dtype=torch.int64, device=dev)   # its face id (none: no hit yet)
+        siblings = boxes[1:].view(-1, 2, 2, 3)                              # children 2k+1, 2k+2 side by side
+        ray = torch.arange(n, device=dev)
+        keep = _slab(o, inv, boxes[:1].expand(n, 2, 3), t_lo, best)         # the root
+        ray = ray[keep]
+        node = torch.zeros_like(ray)
+        L, k = self.leaf_size, torch.arange(self.leaf_size, device=dev)
+        while ray.numel():
+            cnt = self.count[node]
+            is_leaf = cnt > 0
+            # leaves: every (ray, triangle) candidate through the watertight test
+            lr, ln = ray[is_leaf], node[is_leaf]
+            if lr.numel():
+                valid = k < cnt[is_leaf][:, None]                           # (P, L)
+                cr = lr[:, None].expand(-1, L)[valid]                       # (Q,) rays
+                cs = (self.first[ln][:, None] + k)[valid]                   # (Q,) slots
+                tri = tris[cs]
+                tc, _, hit = _watertight(o[cr], d[cr], tri[:, 0], tri[:, 1], tri[:, 2])
+                hit &= (tc >= t_lo[cr]) & (tc <= best[cr])
+                cr, cf, tc = cr[hit], self.order[cs[hit]], tc[hit]
+                if cr.numel():
+                    new = best.scatter_reduce(0, cr, tc, reduce="amin")     # per-ray closest t
+                    win = tc == new[cr]
+                    # ties go to the lower face id; a ray whose t improved forgets its old face
+                    face = torch.where(new < best, torch.full_like(best_face, none), best_face)
+                    best_face = face.scatter_reduce_(0, cr[win], cf[win], reduce="amin")
+                    best = new
+            # internal nodes: both children at once, kept when the ray's segment meets their box
+            ir, inode = ray[~is_leaf], node[~is_leaf]
+            if any_hit:                                                     # finished rays drop their pairs
+                alive = best_face[ir] == none
+                ir, inode = ir[alive], inode[alive]
+            c = self.left[inode]                                            # (P,) odd: 2k + 1
+            keep = _slab(o[ir, None], inv[ir, None], siblings[(c - 1) // 2], t_lo[ir, None], best[ir, None])
+            ray = ir[:, None].expand(-1, 2)[keep]                           # (P, 2) → kept pairs
+            node = (c[:, None] + torch.arange(2, device=dev))[keep]
+        return torch.where(best_face == none, torch.full_like(best_face, -1), best_face)
+
+
+def _ranks(counts):
+    """0, 1, ..., c-1 for every count c, concatenated: (sum counts,) int64."""
+    starts = torch.cumsum(counts, 0) - counts
+    total = int(counts.sum())
+    return torch.arange(total, device=counts.device) - torch.repeat_interleave(starts, counts)
+
+
+def _per_ray(value, N, like, name):
+    v = torch.as_tensor(value, dtype=like.dtype, device=like.device)
+    if v.dim() == 0:
+        v = v.expand(N)
+    if v.shape != (N,):
+        raise ValueError(f"{name} must be a number or an (N,) tensor with N = {N}, got {tuple(v.shape)}")
+    if torch.isnan(v).any():
+        raise ValueError(f"{name} contains NaN")
+    return v
+
+
+def _slab(o, inv, box, t_lo, t_hi):
+    """Does the segment o + t d, t in [t_lo, t_hi], meet the box? o, inv = 1/d (..., 3); box (..., 2, 3)
+    min and max corners; t_lo, t_hi (...). Returns (...) bool.
+
+    A direction component of 0 has inv = ±inf: the slab gives ±inf entry and exit, except when the origin
+    lies exactly on the slab's plane, where 0 · inf = NaN; that case counts as inside the slab (the ray runs
+    in the plane, on the box's face). The exit distance is widened by a few ulps (Ize 2013, "Robust BVH ray
+    traversal") so rounding never culls a box the ray grazes.
+    """
+    a = (box[..., 0, :] - o).mul_(inv)
+    b = (box[..., 1, :] - o).mul_(inv)
+    near = torch.minimum(a, b).nan_to_num_(nan=-math.inf, posinf=math.inf, neginf=-math.inf)
+    far = torch.maximum(a, b).nan_to_num_(nan=math.inf, posinf=math.inf, neginf=-math.inf)
+    far = far.amin(-1)
+    entry = torch.maximum(near.amax(-1), t_lo)
+    exit_ = torch.minimum(far + far.abs() * (4 * torch.finfo(o.dtype).eps), t_hi)
+    return entry <= exit_
+
+
+# --------------------------------------------------------------------------------- raycast → Fragments
+
+def _camera_rays(camera):
+    """One world-space ray per pixel centre, float64: origins (H*W, 3), directions (H*W, 3) and the
+    directions' camera-space z (H*W,), so that ``t = depth / d_z`` (row-major pixels)."""
+    H, W = camera.height, camera.width
+    K, R, t = (camera.K.detach().double(), camera.R.detach().double(), camera.t.detach().double())
+    dev = K.device
+    y, x = torch.meshgrid(torch.arange(H, dtype=torch.float64, device=dev) + 0.5,
+                          torch.arange(W, dtype=torch.float64, device=dev) + 0.5, indexing="ij")
+    q = torch.stack([x.reshape(-1) - K[0, 2], y.reshape(-1) - K[1, 2],
+                     torch.full((H * W,), 1.0, dtype=torch.float64, device=dev) - K[2, 2]], 1)
+    e3 = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64, device=dev)
+    cam = q @ torch.linalg.inv(K).T + e3                                    # K⁻¹ p, the offset formed first
+    eye = -(R.T @ t)
+    if camera.orthographic:                                                 # parallel rays along camera +z
+        o_cam = torch.cat([cam[:, :2], torch.zeros_like(cam[:, :1])], 1)
+        d_cam = e3.expand(H * W, 3)
+        return o_cam @ R + eye, d_cam @ R, d_cam[:, 2]
+    return eye.expand(H * W, 3), cam @ R, cam[:, 2]
+
+
+def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
+    """Ray-cast a triangle mesh: the same ``Fragments`` as ``rasterize``, found by tracing rays.
+
+    mesh: anything with ``verts`` (V, 3) and ``faces`` (F, 3); camera: a ``Camera`` (perspective or
+    orthographic). bvh: a ``BVH`` of this mesh to reuse (built when None). One ray per pixel centre
+    (j + 0.5, i + 0.5), traced in float64 (as ``rasterize`` decides coverage in float64), between the near
+    and far planes: a ray whose direction has camera-space z component d_z runs over t in
+    [near / d_z, far / d_z], so exactly the points with depth in [near, far] count. The BVH picks the visible
+    face (ties to the lower face id); the barycentrics and depth come from ``raster._surface_at``, exactly as
+    in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and K, R, t. Returns Fragments (H, W).
+    """
+    verts, faces = _check_inputs(mesh, camera)
+    H, W = camera.height, camera.width
+    if bvh is None:
+        bvh = BVH(mesh)
+    elif not isinstance(bvh, BVH) or bvh.order.numel() != faces.shape[0]:
+        raise ValueError("bvh must be a BVH built from this mesh")
+    o, d, dz = _camera_rays(camera)
+    with torch.no_grad():                                                   # which face: not differentiable
+        face = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(camera.near / dz).to(bvh.device),
+                             t_max=(camera.far / dz).to(bvh.device)).face_id.to(verts.device)
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    pix = (face >= 0).nonzero().squeeze(1)
+    x, y = (pix % W).double() + 0.5, (pix // W).double() + 0.5
+    bary, depth = _surface_at(face.index_select(0, pix), x, y, verts, faces, camera)
+    bary_img = torch.zeros(H * W, 3, dtype=dtype, device=verts.device).index_put((pix,), bary)
+    depth_img = torch.full((H * W,), math.inf, dtype=dtype, device=verts.device).index_put((pix,), depth)
+    return Fragments(face.view(H, W), bary_img.view(H, W, 3), depth_img.view(H, W))
+
+
+# ------------------------------------------------------------------------------- shadow rays, area lights
+
+def visible(points, light, bvh: BVH, *, directional: bool = False, offset: float | None = None,
+            normals=None) -> torch.Tensor:
+    """Shadow rays: can each point see the light?
+
+    points: (N, 3) world space. light: a point light's position (3,) or (N, 3) (``PointLight.position``);
+    with ``directional=True`` the direction the light *travels* (3,) or (N, 3) (``DirectionalLight.direction``;
+    the shadow ray goes the other way, to infinity); or (N, S, 3) sample positions on an area light (see
+    ``rectangle_light_samples``, ``disk_light_samples``). bvh: the BVH of the occluding mesh.
+    Returns (N,) bool, True where nothing blocks the segment to the light, or for (N, S, 3) samples the
+    fraction (N,) of samples visible, in [0, 1] (a soft shadow).
+
+    Self-intersection: a point on a surface, rounded, lies a little above or below it, and its shadow ray could
+    hit its own triangle. ``offset`` (world units; default 1e-4 times the diagonal of the BVH's bounds, far
+    above float32 rounding of the scene's coordinates and far below its features) guards against it:
+
+    * without ``normals``, each ray starts at the point and ignores hits closer than ``offset`` along the ray
+      (and closer than ``offset`` to the light): t_min = offset. Needs nothing but the points; a surface
+      point with the light behind its own surface is *not* shadowed by that surface (shade it with n · l).
+    * with ``normals`` (N, 3), the geometric normals of the points' faces (the side they are seen from),
+      each ray starts ``offset`` above the surface along its normal: a light behind the surface is then
+      shadowed by it, as it should be; at grazing light the offset origin still clears the own triangle.
+    """
+    if not isinstance(bvh, BVH):
+        raise TypeError(f"bvh must be a BVH, got {type(bvh).__name__}")
+    p = as_tensor(points, name="points")
+    dtype = torch.promote_types(p.dtype, bvh.dtype)
+    p = p.to(dtype=dtype, device=bvh.device)
+    if p.dim() != 2 or p.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {tuple(p.shape)}")
+    N = p.shape[0]
+    L = as_tensor(light, dtype=dtype, device=bvh.device, name="light")
+    area = L.dim() == 3
+    if L.shape == (3,):
+        L = L.expand(N, 3)
+    if not (L.shape == (N, 3) or (area and L.shape[0] == N and L.shape[2] == 3 and not directional)):
+        raise ValueError(f"light must have shape (3,), (N, 3) or, for area-light samples, (N, S, 3) with "
+                         f"N = {N}, got {tuple(L.shape)}")
+    if not torch.isfinite(L).all():
+        raise ValueError("light contains NaN or inf")
+    if offset is None:
+        diag = float((bvh.bounds[1] - bvh.bounds[0]).norm()) if bvh.num_nodes else 0.0
+        offset = 1e-4 * diag if diag > 0 else 1e-4
+    offset = float(offset)
+    if not offset >= 0:
+        raise ValueError(f"offset must be >= 0, got {offset}")
+    S = L.shape[1] if area else 1
+    L = L.reshape(N * S, 3)
+    o = p.repeat_interleave(S, 0)
+    if normals is not None:
+        n = as_tensor(normals, dtype=dtype, device=bvh.device, name="normals")
+        if n.shape != (N, 3):
+            raise ValueError(f"normals must have shape (N, 3), got {tuple(n.shape)}")
+        n = n / n.norm(dim=1, keepdim=True).clamp_min(torch.finfo(dtype).tiny)
+        o = o + offset * n.repeat_interleave(S, 0)
+    if directional:
+        d = -L / L.norm(dim=1, keepdim=True).clamp_min(torch.finfo(dtype).tiny)
+        t_lo, t_hi = torch.full((N * S,), offset, dtype=dtype, device=o.device), math.inf
+    else:
+        d = L - o                                                           # t = 1 at the light
+        dist = d.norm(dim=1)
+        safe = dist.clamp_min(torch.finfo(dtype).tiny)
+        t_lo, t_hi = offset / safe, 1 - offset / safe
+    if normals is not None:
+        t_lo = torch.zeros_like(t_lo)
+    blocked = bvh.intersect(o, d, t_min=t_lo, t_max=t_hi, any_hit=True).hit
+    free = ~blocked
+    if area:
+        return free.view(N, S).to(dtype).mean(1)
+    return free
+
+
+def _generator(seed, generator, device):
+    if generator is not None:
+        return generator
+    return torch.Generator(device=device).manual_seed(int(seed))
+
+
+def _stratified(n_points, grid, dtype, device, seed, generator):
+    """(N, grid², 2) jittered samples in [0, 1)²: one uniform sample in each of grid × grid cells, per point."""
+    if int(grid) < 1 or int(n_points) < 0:
+        raise ValueError(f"need grid >= 1 and n_points >= 0, got grid={grid}, n_points={n_points}")
+    g = _generator(seed, generator, device)
+    cells = torch.arange(grid, dtype=dtype, device=device)
+    i, j = torch.meshgrid(cells, cells, indexing="ij")
+    base = torch.stack([i.reshape(-1), j.reshape(-1)], 1)                  # (S, 2) cell corners
+    jitter = torch.rand((n_points, grid * grid, 2), generator=g, dtype=dtype, device=device)
+    return (base + jitter) / grid
+
+
+def rectangle_light_samples(corner, edge1, edge2, n_points: int, grid: int = 4, *, seed: int = 0,
+                            generator: torch.Generator | None = None) -> torch.Tensor:
+    """Stratified points on a rectangular area light, a fresh jittered set for each shaded point.
+
+    corner, edge1, edge2: (3,) the rectangle ``corner + u edge1 + v edge2``, u, v in [0, 1]. n_points: N.
+    grid: samples per side (S = grid² strata, one jittered sample each). seed / generator: the randomness
+    (a ``torch.Generator`` wins over ``seed``). Returns (N, S, 3), for ``visible(points, samples, bvh)``.
+    """
+    c = as_tensor(corner, name="corner")
+    e1 = as_tensor(edge1, dtype=c.dtype, device=c.device, name="edge1")
+    e2 = as_tensor(edge2, dtype=c.dtype, device=c.device, name="edge2")
+    for v, name in ((c, "corner"), (e1, "edge1"), (e2, "edge2")):
+        if v.shape != (3,):
+            raise ValueError(f"{name} must have shape (3,), got {tuple(v.shape)}")
+    uv = _stratified(n_points, grid, c.dtype, c.device, seed, generator)
+    return c + uv[..., :1] * e1 + uv[..., 1:] * e2
+
+
+def disk_light_samples(centre, normal, radius: float, n_points: int, grid: int = 4, *, seed: int = 0,
+                       generator: torch.Generator | None = None) -> torch.Tensor:
+    """Stratified points on a disk light (centre (3,), normal (3,), radius), N sets of S = grid² samples.
+
+    The strata of the unit square are carried to the disk by Shirley and Chiu's concentric map, which keeps
+    them of equal area and compact (a polar map would make slivers). Returns (N, S, 3).
+    """
+    c = as_tensor(centre, name="centre")
+    n = as_tensor(normal, dtype=c.dtype, device=c.device, name="normal")
+    if c.shape != (3,) or n.shape != (3,) or float(n.norm()) == 0:
+        raise ValueError(f"centre and normal must have shape (3,), normal non-zero; got {tuple(c.shape)}, "
+                         f"{tuple(n.shape)}")
+    if not float(radius) > 0:
+        raise ValueError(f"radius must be > 0, got {radius}")
+    n = n / n.norm()
+    helper = torch.zeros_like(n)
+    helper[int(n.abs().argmin())] = 1.0                                     # an axis far from the normal
+    a = torch.linalg.cross(n, helper)
+    a = a / a.norm()
+    b = torch.linalg.cross(n, a)
+    uv = 2 * _stratified(n_points, grid, c.dtype, c.device, seed, generator) - 1   # (N, S, 2) in [-1, 1)²
+    x, y = uv[..., 0], uv[..., 1]
+    wide = x.abs() > y.abs()
+    r = torch.where(wide, x, y)
+    safe = torch.where(r == 0, torch.ones_like(r), r)
+    phi = torch.where(wide, (math.pi / 4) * y / safe, math.pi / 2 - (math.pi / 4) * x / safe)
+    r = r * float(radius)
+    return c + (r * torch.cos(phi))[..., None] * a + (r * torch.sin(phi))[..., None] * b
