@@ -100,3 +100,60 @@ def test_bench_aa_rows_and_plot(tmp_path):
         assert by[f"adaptive {k}x{k}"]["rmse"] == by[f"ss {k}x{k}"]["rmse"]
     plot_pareto(rows, tmp_path / "pareto.png")
     assert (tmp_path / "pareto.png").stat().st_size > 1000
+
+
+def test_bench_raytrace_tiny_scene_agrees_with_brute_force(capsys):
+    """The ray-tracing bench on a tiny scene: every kind of ray, the BVH agreeing with brute force on the
+    subset; Embree (when installed) side by side, otherwise skipped with a message."""
+    from course.bench.raytrace import _embree, brute_force, format_table, measure
+    from course.camera import Camera
+    from course.models import icosphere
+    mesh = icosphere(1)
+    cam = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=64, height=48)
+    embree, msg = _embree()
+    rows = measure("tiny", repeat=1, scale=0.5, n_incoherent=256, brute_pairs=4096, embree=embree,
+                   scene_override=(mesh, cam))
+    assert [r["kind"] for r in rows] == ["build", "primary", "shadow", "incoherent"]
+    assert all(r["ms"] > 0 for r in rows)
+    assert rows[1]["rays"] == 32 * 24 and rows[3]["rays"] == 256
+    assert all(r["agree"] == 1.0 and r["speedup"] > 0 for r in rows[1:]), rows
+    if embree is None:
+        assert "embreex" in msg
+    else:
+        assert all(r["ratio"] > 0 for r in rows)
+        o = torch.tensor([[0.13, 0.07, 3.0], [5.0, 5.0, 5.0]])
+        d = torch.tensor([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+        ids = embree.trace(embree.build(mesh), o, d)                       # Embree: same face, and a miss
+        assert list(ids) == brute_force(o, d, mesh.verts[mesh.faces]).tolist()
+    assert "incoherent" in format_table(rows)
+
+
+def test_bench_raytrace_thin_scene_and_skip_message(capsys, monkeypatch):
+    from course.bench import raytrace
+    mesh, cam = raytrace.thin_scene(n_thin=50, n_flat=4, size=16)
+    assert mesh.num_faces == 54
+    monkeypatch.setattr(raytrace, "_Embree", lambda: (_ for _ in ()).throw(ImportError("no embreex")))
+    monkeypatch.setattr(raytrace, "scene", lambda name, dtype=torch.float32: (mesh, cam))
+    rows = raytrace.bench_raytrace(["thin"], repeat=1, scale=1.0, n_incoherent=64, brute_pairs=2048,
+                                   vs_embree=True)
+    out = capsys.readouterr().out
+    assert "--vs embree skipped" in out and "pip install embreex" in out
+    assert {r["kind"] for r in rows} == {"build", "primary", "shadow", "incoherent"}
+
+
+def test_bench_shadows_rows_and_plot(tmp_path, capsys):
+    """Shadow maps converge to the ray-traced shadow as the resolution grows; N shadow rays and N shadow maps
+    approach the area-light reference; the plot is written."""
+    from course.bench.shadows import bench_shadows
+    rows = bench_shadows(resolutions=(64, 256), size=32, repeat=1, samples=(1, 4), area_points=64,
+                         reference_samples=64, area_resolution=64, plot=str(tmp_path / "p.png"))
+    hard = {(r["method"], r["param"]): r for r in rows if r["case"] == "hard"}
+    assert hard[("ray traced", 1)]["error"] == 0
+    assert hard[("map pcf1", 256)]["error"] < hard[("map pcf1", 64)]["error"] < 0.2
+    assert ("map pcf3", 64) in hard
+    area = {(r["method"], r["param"]): r for r in rows if r["case"] == "area"}
+    assert area[("shadow rays", 4)]["error"] < area[("shadow rays", 1)]["error"]
+    assert area[("shadow maps 64", 4)]["error"] < area[("shadow maps 64", 1)]["error"]
+    assert all(r["ms"] > 0 for r in rows)
+    assert (tmp_path / "p.png").stat().st_size > 1000
+    assert "teapot" in capsys.readouterr().out

@@ -10,6 +10,10 @@
   triangles, far from the origin): time, and depth and barycentric error.
 * ``aa`` (``course.bench.aa``): antialiasing — one sample, supersampling (regular, jittered), adaptive
   supersampling and exact coverage: time against RMSE to the exact image, a table and a Pareto plot.
+* ``raytrace`` (``course.bench.raytrace``): BVH build, primary / shadow / incoherent rays per second, the
+  speed-up over brute force, optionally side by side with Embree.
+* ``shadows`` (``course.bench.shadows``): shadow maps (resolution, PCF) and area-light shadow maps against
+  ray-traced shadows: time against error, a table and a Pareto plot.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options) and ``run(args)``,
 and one line in ``BENCHES`` below makes it a sub-command; ``--repeat`` and ``--json`` are common to all.
@@ -24,7 +28,7 @@ import json
 
 import torch
 
-from . import aa, precision, raster, skips
+from . import aa, precision, raster, raytrace, shadows, skips
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -32,7 +36,8 @@ from .timing import time_it, time_side_by_side
 __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "bench_skips", "cli"]
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
-BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa}
+BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
+           "raytrace": raytrace, "shadows": shadows}
 
 
 def cli(argv) -> int:
