@@ -50,7 +50,7 @@ import torch
 from .raster import Fragments, _check_inputs, _surface_at
 from .tensors import as_tensor
 
-__all__ = ["intersect_triangles", "moller_trumbore", "morton_codes", "BVH", "Hits", "raycast", "visible",
+__all__ = ["intersect_triangles", "moller_trumbore", "ray_box", "morton_codes", "BVH", "Hits", "raycast", "visible",
            "rectangle_light_samples", "disk_light_samples"]
 
 
@@ -404,6 +404,32 @@ def _per_ray(value, N, like, name):
     if torch.isnan(v).any():
         raise ValueError(f"{name} contains NaN")
     return v
+
+
+def ray_box(origins, directions, lo, hi):
+    """The slab test (Kay and Kajiya 1986): where N rays meet N axis-aligned boxes.
+
+    origins, directions, lo, hi: (N, 3); box k is the closed box [lo_k, hi_k]. Along axis a the ray lies
+    between the box's two planes for t between (lo_a - o_a) / d_a and (hi_a - o_a) / d_a (the smaller is the
+    entry); with d_a = 0 it lies between them for every t when lo_a <= o_a <= hi_a and never otherwise.
+    Returns ``hit`` (N,) bool, ``t_near`` and ``t_far`` (N,): the largest entry and the smallest exit, and
+    ``hit = t_near <= t_far and t_far >= 0`` (t_near < 0: the origin is inside the box). The BVH's traversal
+    uses the same test on many (ray, node) pairs at once (``_slab``), clipped to each ray's [t_min, t_max].
+    """
+    o = as_tensor(origins, name="origins")
+    d, lo, hi = (as_tensor(x, dtype=o.dtype, device=o.device, name=n)
+                 for x, n in ((directions, "directions"), (lo, "lo"), (hi, "hi")))
+    if not (o.shape == d.shape == lo.shape == hi.shape) or o.dim() != 2 or o.shape[1] != 3:
+        raise ValueError(f"origins, directions, lo and hi must all have shape (N, 3), got {tuple(o.shape)}, "
+                         f"{tuple(d.shape)}, {tuple(lo.shape)} and {tuple(hi.shape)}")
+    a, b = (lo - o) / d, (hi - o) / d                                       # ±inf or NaN where d = 0
+    near, far = torch.minimum(a, b), torch.maximum(a, b)
+    parallel, between = d == 0, (o >= lo) & (o <= hi)
+    inf = torch.full_like(near, math.inf)
+    near = torch.where(parallel, torch.where(between, -inf, inf), near)
+    far = torch.where(parallel, torch.where(between, inf, -inf), far)
+    t_near, t_far = near.amax(-1), far.amin(-1)
+    return (t_near <= t_far) & (t_far >= 0), t_near, t_far
 
 
 def _slab(o, inv, box, t_lo, t_hi):

@@ -207,7 +207,8 @@ def shadow_map(mesh, light, resolution: int = 1024, *, bounds=None, margin: floa
     mesh: a Mesh (or a sequence of Meshes, joined), every shadow caster. light: Directional, Spot or Point.
     resolution: texels per side. bounds: what to fit the light camera to (default: the mesh itself; give
     the receivers too if they are not part of ``mesh``), as in ``light_camera``.
-    cull_backfaces: pass to ``rasterize`` (storing back faces is the classic alternative to a big bias).
+    cull_backfaces: pass to ``rasterize``: store only the faces turned toward the light. (The classic
+    alternative to a large bias is the opposite, storing only the faces turned away from it.)
     Returns a ``ShadowMap`` whose depth (C, H, W) has the mesh's dtype and device, detached.
     """
     meshes = _as_meshes(mesh)
