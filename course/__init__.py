@@ -32,7 +32,9 @@ from .camera import (Camera, axis_angle_to_matrix, euler_to_matrix, homogeneous,
 from .mesh import Mesh, join_meshes, load_mesh
 from .models import checker_texture, cube, default_scene_mesh, icosphere, plane, teapot, torus
 from .raster import Fragments, interpolate, rasterize, rasterize_naive
+from .raytrace import BVH, raycast
 from .render import RenderResult, RenderSettings, Scene
+from .shadows import SpotLight, shadow_factor, shadow_map
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, linear_to_srgb,
                       phong, sample_texture, srgb_to_linear)
 
@@ -49,6 +51,8 @@ __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate",
     # antialiasing
     "supersample", "adaptive_supersample", "exact_coverage",
+    # shadows and ray tracing
+    "shadow_map", "shadow_factor", "SpotLight", "BVH", "raycast",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
     "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",
