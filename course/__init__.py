@@ -34,9 +34,9 @@ from .models import checker_texture, cube, default_scene_mesh, icosphere, plane,
 from .raster import Fragments, interpolate, rasterize, rasterize_naive
 from .raytrace import BVH, raycast
 from .render import RenderResult, RenderSettings, Scene
-from .shadows import SpotLight, shadow_factor, shadow_map
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, linear_to_srgb,
                       phong, sample_texture, srgb_to_linear)
+from .shadows import SpotLight, shadow_factor, shadow_map
 
 __version__ = "0.1.0"
 
