@@ -35,15 +35,16 @@ from typing import Optional, Sequence
 
 import torch
 
+from course.antialias import discontinuity_pixels, resolve, sample_fragments
 from course.camera import Camera
 from course.mesh import Mesh
 from course.raster import Fragments, _is_camera, interpolate, rasterize
+from course.raytrace import BVH
+from course.raytrace import visible as ray_visible
 from course.shading import (
     AmbientLight, DirectionalLight, Material, PointLight, flat_shading, gouraud_shading, mip_pyramid, normalize,
     phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions, wireframe_overlay,
 )
-from course.raytrace import BVH
-from course.raytrace import visible as ray_visible
 from course.shadows import shadow_factor, shadow_map
 from course.tensors import as_tensor
 
@@ -456,7 +457,6 @@ def _edge_keys(geo, settings) -> torch.Tensor:
 def _supersample(scene, geo, frags, settings, passes, image, silhouette, shadows=None):
     """Replace pixels of the one-sample image by the box filter of k x k samples: all of them, or (adaptive)
     those a discontinuity touches. Returns the image, the silhouette (covered fraction) and the passes run."""
-    from course.antialias import discontinuity_pixels, resolve, sample_fragments
     H, W = frags.shape
     k, ran = settings.samples, ("supersample",)
     pixels = None

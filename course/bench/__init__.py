@@ -15,7 +15,8 @@
 * ``shadows`` (``course.bench.shadows``): shadow maps (resolution, PCF) and area-light shadow maps against
   ray-traced shadows: time against error, a table and a Pareto plot.
 
-A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options) and ``run(args)``,
+A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
+optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
 and one line in ``BENCHES`` below makes it a sub-command; ``--repeat`` and ``--json`` are common to all.
 
 The timing helpers they share (``time_it``, ``time_side_by_side``) live in ``course.bench.timing``. Timings
@@ -45,7 +46,9 @@ def cli(argv) -> int:
     which = parser.add_subparsers(dest="which", required=True, metavar="BENCH")
     for name, module in BENCHES.items():
         sub = which.add_parser(name, help=module.DESCRIPTION, description=module.DESCRIPTION)
-        sub.add_argument("--repeat", type=int, default=7, help="timed runs per measurement (median reported)")
+        repeat = getattr(module, "REPEAT", 7)                                # slow benchmarks time fewer runs
+        sub.add_argument("--repeat", type=int, default=repeat,
+                         help=f"timed runs per measurement (median reported; default {repeat})")
         sub.add_argument("--json", help="also write the rows to this JSON file")
         sub.add_argument("--threads", type=int, help="torch threads (default: torch's choice); 1 gives steadier "
                                                      "timings on a machine shared with other jobs")

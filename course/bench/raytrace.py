@@ -34,6 +34,7 @@ from .timing import time_it, time_side_by_side
 __all__ = ["SCENES", "scene", "thin_scene", "brute_force", "measure", "bench_raytrace", "format_table",
            "add_arguments", "run"]
 
+REPEAT = 3               # timed runs per measurement (these take seconds each)
 DESCRIPTION = "ray tracing: BVH build, primary / shadow / incoherent Mrays/s, vs brute force (and Embree)"
 
 SCENES = tuple(RASTER_SCENES) + ("thin",)
@@ -303,6 +304,5 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> list[dict]:
-    repeat = args.repeat if args.repeat != 7 else 3                          # 7 is the common default; 3 here
-    return bench_raytrace(args.scenes, repeat, args.scale, args.incoherent, args.brute_pairs,
+    return bench_raytrace(args.scenes, args.repeat, args.scale, args.incoherent, args.brute_pairs,
                           vs_embree=args.vs == "embree")

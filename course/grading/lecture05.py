@@ -17,23 +17,9 @@ import math
 import torch
 
 from .helpers import Fail, _call, _diagnose, _fmt, _ref, _shape, compare, generator, grade_parts, require, to_tensor
-from .registry import calls_reference, task
+from .registry import forbidden_call, task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
-
-
-def _forbidden(impl, name: str, functions) -> str | None:
-    """A message when ``impl`` can reach one of the package ``functions`` (module, qualname) that would do
-    the task's work, else None."""
-    for module, qualname in functions:
-        try:
-            reaches = calls_reference(impl, module, qualname)
-        except Exception:                                                # an odd object: let the check judge
-            reaches = False
-        if reaches:
-            return (f"{name} calls {module}.{qualname}, which does this task's work for you: write it yourself "
-                    "(the task says which package functions you may use)")
-    return None
 
 
 # ------------------------------------------------------------------------------- 5.1 clipping a polygon
@@ -437,7 +423,7 @@ def _check_segment_pixels(impl):
         run(f64([-1e5, 2.31]), f64([1e5, 6.93]), "huge coordinates")
         run(torch.tensor([0.6, 7.7]), torch.tensor([12.2, 0.45]), "float32 input")
         run(f64([0.5, 0.5]), f64([4.5, 2.5]), "a 1 × 1 image", 1, 1)
-    message = _forbidden(impl, "segment_pixels", [("course.raster", "pixel_triangle_pairs")])
+    message = forbidden_call(impl, "segment_pixels", [("course.raster", "pixel_triangle_pairs")])
     if message:
         return 0, message
     return grade_parts((1, "random segments", single),
@@ -545,7 +531,7 @@ def _check_supersample(impl):
         off = ([[[20.0, 1.0], [30.0, 2.0], [25.0, 9.0]]], [1.0])
         run(off, 2, (0.25, 0.5, 0.75), torch.float64, "supersample(a face outside the image: all background)",
             True)
-    message = _forbidden(impl, "supersample", [("course.antialias", name) for name in (
+    message = forbidden_call(impl, "supersample", [("course.antialias", name) for name in (
         "regular_offsets", "sample_fragments", "flat_colors", "adaptive_supersample")])
     if message:
         return 0, message

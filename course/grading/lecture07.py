@@ -16,24 +16,11 @@ import math
 import torch
 
 from .helpers import _call, _ref, _unpack, compare, generator, grade_parts, require, to_tensor
-from .registry import calls_reference, task
+from .registry import forbidden_call, task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
 
 EPS = 1e-6                       # 7.3: hits with t <= EPS or t >= 1 - EPS do not block (t = 1 at the light)
-
-
-def _forbidden(impl, name: str, functions) -> str | None:
-    """A message when ``impl`` can reach one of the package ``functions`` (module, qualname), else None."""
-    for module, qualname in functions:
-        try:
-            reaches = calls_reference(impl, module, qualname)
-        except Exception:                                                # an odd object: let the check judge
-            reaches = False
-        if reaches:
-            return (f"{name} calls {module}.{qualname}, which does this task's work for you: write it yourself "
-                    "(the task says which package functions you may use)")
-    return None
 
 
 def _mismatch(got: torch.Tensor, expected: torch.Tensor, where: torch.Tensor) -> bool:
@@ -134,7 +121,7 @@ def _parallel_rays(dtype=torch.float64):
 
 @task("7.1", "ray_triangle", points=3, reference=("course.raytrace", "intersect_triangles"))
 def _check_ray_triangle(impl):
-    forbidden = _forbidden(impl, "ray_triangle", [("course.raytrace", "moller_trumbore"),
+    forbidden = forbidden_call(impl, "ray_triangle", [("course.raytrace", "moller_trumbore"),
                                                   ("course.raytrace", "BVH")])
     if forbidden:
         return 0, forbidden
@@ -245,7 +232,7 @@ def _axis_rays(dtype=torch.float64):
 
 @task("7.2", "ray_aabb", points=3, reference=("course.raytrace", "ray_box"))
 def _check_ray_aabb(impl):
-    forbidden = _forbidden(impl, "ray_aabb", [("course.raytrace", "_slab"), ("course.raytrace", "BVH")])
+    forbidden = forbidden_call(impl, "ray_aabb", [("course.raytrace", "_slab"), ("course.raytrace", "BVH")])
     if forbidden:
         return 0, forbidden
 
@@ -326,7 +313,7 @@ def _shadow_scene(dtype=torch.float64):
 
 @task("7.3", "shadow_ray", points=3, reference=("course.raytrace", "visible"))
 def _check_shadow_ray(impl):
-    forbidden = _forbidden(impl, "shadow_ray", [("course.raytrace", "BVH"),
+    forbidden = forbidden_call(impl, "shadow_ray", [("course.raytrace", "BVH"),
                                                 ("course.raytrace", "moller_trumbore")])
     if forbidden:
         return 0, forbidden

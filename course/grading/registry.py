@@ -116,6 +116,20 @@ def _referenced_values(fn, names: set[str]) -> list:
     return values
 
 
+def forbidden_call(impl, name: str, functions) -> str | None:
+    """A message when ``impl`` can reach one of the package ``functions`` ((module, qualname) pairs) that
+    would do the task's work besides its reference (helpers a task forbids too), else None."""
+    for module, qualname in functions:
+        try:
+            reaches = calls_reference(impl, module, qualname)
+        except Exception:                                                # an odd object: let the check judge
+            reaches = False
+        if reaches:
+            return (f"{name} calls {module}.{qualname}, which does this task's work for you: write it yourself "
+                    "(the task says which package functions you may use)")
+    return None
+
+
 def calls_reference(fn, module: str, qualname: str, _seen=None) -> bool:
     """True when ``fn``'s code can reach the package function ``module.qualname``: the function itself as a
     global, default or closure value, or a ``course`` module (or, for a method, its class) imported or
