@@ -44,13 +44,13 @@ from types import SimpleNamespace
 
 import torch
 
-from .camera import Camera
+from .camera import Camera, project_points
 from .raster import rasterize
 from .shading import DirectionalLight, PointLight
 from .tensors import _check_shape, as_tensor
 
-__all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "shadow_factor",
-           "area_light_samples", "area_shadow_factor"]
+__all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "light_space", "biased_depth",
+           "biased_lit", "pcf", "shadow_factor", "area_light_samples", "area_shadow_factor"]
 
 #: Cube-map face order: the axis each face's camera looks along (OpenGL's order).
 CUBE_FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -230,6 +230,115 @@ def shadow_map(mesh, light, resolution: int = 1024, *, bounds=None, margin: floa
     return ShadowMap(_light_kind(light), cams, depth.detach(), light, radius)
 
 
+# ------------------------------------------------------------------------------- pass 2, building blocks
+
+def light_space(points, K, R=None, t=None, orthographic: bool = False) -> torch.Tensor:
+    """World points in a light camera: image coordinates (x, y) and camera-space depth, as (N, 3).
+
+    points: (N, 3) world space. Either ``light_space(points, camera)`` with a ``Camera`` (a shadow map's
+    ``.camera`` or one of its ``.cameras``), or ``light_space(points, K, R, t, orthographic)`` with K: (3, 3),
+    R: (3, 3), t: (3,). Returns (N, 3), the columns (x, y, depth): x the column and y the row in the light's
+    image (texel (i, j) covers [j, j + 1) × [i, i + 1)), depth the camera-space z (along the light's axis, not
+    the distance to the light). Perspective divides by depth, orthographic does not: this is
+    ``course.camera.project_points`` with its two results side by side, the lookup of pass 2.
+    """
+    if isinstance(K, Camera):
+        if R is not None or t is not None:
+            raise TypeError("light_space(points, camera) takes no R or t: the camera has its own")
+        K, R, t, orthographic = K.K, K.R, K.t, K.orthographic
+    elif R is None or t is None:
+        raise TypeError("light_space needs a Camera, or K, R and t: light_space(points, K, R, t, orthographic)")
+    pts = as_tensor(points, name="points")
+    _check_shape(pts, (None, 3), "points")
+    xy, depth = project_points(pts, K, R, t, orthographic=bool(orthographic))
+    return torch.cat([xy, depth[:, None]], 1)
+
+
+def _not_behind(depth: torch.Tensor, stored: torch.Tensor) -> torch.Tensor:
+    """The shadow test itself, lit where ``not (depth > stored)``: a point exactly at the stored depth is lit,
+    and so is one over an empty texel (stored +inf)."""
+    return ~(depth > stored)
+
+
+def biased_depth(z, texel, tan_theta, bias: float, slope_bias: float) -> torch.Tensor:
+    """The light-space depth moved toward the light by the two-part bias: ``z - (bias + slope_bias * texel *
+    tan_theta)``.
+
+    z: (N,) light-space depth; texel: (N,) (or a scalar) the world width of one texel at the point (``1 / fx``
+    orthographic, ``z / fx`` perspective); tan_theta: (N,) (or a scalar) tan θ, θ between the normal and the
+    direction to the light, already clamped; bias: world units; slope_bias: texels. Returns (N,) in z's dtype.
+    """
+    return z - (bias + slope_bias * texel * tan_theta)
+
+
+def biased_lit(z, stored, texel, tan_theta, bias: float, slope_bias: float) -> torch.Tensor:
+    """The biased comparison of pass 2: True where a point is lit, ``not (z - total > stored)`` with
+    ``total = bias + slope_bias * texel * tan_theta`` (``biased_depth``).
+
+    z: (N,) each point's light-space depth; stored: (N,) the depth stored in its texel (+inf for an empty
+    texel: lit); texel, tan_theta: (N,) as in ``biased_depth``; bias, slope_bias: floats. Returns (N,) bool.
+    A point exactly at the stored depth after the bias is lit. ``shadow_factor`` with ``pcf=1`` is this test
+    at the texel holding each point.
+    """
+    z, stored = as_tensor(z, name="z"), as_tensor(stored, name="stored")
+    if z.dim() != 1:
+        raise ValueError(f"z must have shape (N,), one depth per point, got {tuple(z.shape)}")
+    if stored.shape != z.shape:
+        raise ValueError(f"stored must have one depth per point, shape {tuple(z.shape)}, got {tuple(stored.shape)}")
+    return _not_behind(biased_depth(z, texel, tan_theta, bias, slope_bias), stored)
+
+
+def pcf(depth_map, coords, depths, k: int = 1, *, outside: str = "lit") -> torch.Tensor:
+    """Percentage-closer filtering: the fraction of the k×k texels around each point's texel whose stored
+    depth is not nearer than the point's (Reeves, Salesin and Cook 1987).
+
+    depth_map: (H, W) one shadow map (+inf where empty); coords: (N, 2) each point's image coordinates (x, y)
+    in the light camera, inside the map (0 <= x <= W, 0 <= y <= H; the texel is row ⌊y⌋, column ⌊x⌋, clamped
+    into the map so that x = W reads the last column); depths: (N,) the points' light-space depths, already
+    biased (``biased_depth``); k: odd filter size, the window is offsets -(k - 1)/2 … (k - 1)/2.
+    outside: what a neighbour outside the map says: ``"lit"`` (the map cannot see there; it still counts in the
+    k×k) or ``"clamp"`` (read the nearest edge texel: a cube map's faces meet there).
+    Returns (N,) in depth_map's dtype (depths are compared in that dtype), each value a multiple of 1 / k².
+    It filters the 0/1 comparisons, never the depths.
+    """
+    if isinstance(k, bool) or int(k) != k or k < 1 or k % 2 == 0:
+        raise ValueError(f"k must be an odd integer >= 1 (the size of the k×k filter), got {k!r}")
+    if outside not in ("lit", "clamp"):
+        raise ValueError(f"outside must be 'lit' or 'clamp', got {outside!r}")
+    depth_map = as_tensor(depth_map, name="depth_map")
+    if depth_map.dim() != 2:
+        raise ValueError(f"depth_map must be one (H, W) map, got shape {tuple(depth_map.shape)}")
+    coords = as_tensor(coords, name="coords")
+    _check_shape(coords, (None, 2), "coords")
+    depths = as_tensor(depths, dtype=depth_map.dtype, device=depth_map.device, name="depths")
+    if depths.shape != coords.shape[:1]:
+        raise ValueError(f"depths must have one value per point, shape ({coords.shape[0]},), got "
+                         f"{tuple(depths.shape)}")
+    k, (H, W) = int(k), depth_map.shape
+    col = coords[:, 0].floor().long().clamp(0, W - 1)
+    row = coords[:, 1].floor().long().clamp(0, H - 1)
+    flat = depth_map.reshape(-1)
+    r = (k - 1) // 2
+    lit = torch.zeros(depths.shape, dtype=depth_map.dtype, device=depth_map.device)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            rr, cc = row + dy, col + dx
+            seen = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W)
+            if outside == "clamp":
+                seen = torch.ones_like(seen)
+            stored = flat.index_select(0, rr.clamp(0, H - 1) * W + cc.clamp(0, W - 1))
+            lit += (~seen | _not_behind(depths, stored)).to(depth_map.dtype)
+    return lit / (k * k)
+
+
+def _tan_theta(normals, to_light, max_slope: float):
+    """tan of the angle between (M, 3) normals and (M, 3) directions to the light, clamped to max_slope."""
+    cos = ((normals * to_light).sum(-1).abs()
+           / (normals.norm(dim=-1) * to_light.norm(dim=-1)).clamp_min(1e-30)).clamp(0, 1)
+    sin = (1 - cos * cos).clamp_min(0).sqrt()
+    return torch.where(sin <= max_slope * cos, sin / cos.clamp_min(1e-30), torch.full_like(cos, max_slope))
+
+
 # ----------------------------------------------------------------------------------------------- pass 2
 
 def shadow_factor(points_world, normals, shadow_map: ShadowMap, *, bias: float | None = None,
@@ -244,6 +353,10 @@ def shadow_factor(points_world, normals, shadow_map: ShadowMap, *, bias: float |
     of the k×k comparisons around the point's texel (1 = one nearest-texel comparison).
     Returns (N,) in the points' dtype (promoted with the map's): each value a multiple of 1 / k².
     Points outside the map's frustum are lit (1). Not differentiable (hard comparisons).
+
+    It is the three building blocks in a row: ``light_space`` (texel and depth of each point), ``biased_depth``
+    (the bias, its slope term widened by (k + 1) / 2 for the PCF window) and ``pcf`` (``outside="clamp"`` for
+    a cube map); with ``pcf=1`` that is ``biased_lit`` at each point's texel.
     """
     if not isinstance(shadow_map, ShadowMap):
         raise TypeError(f"shadow_map must be a ShadowMap, got {type(shadow_map).__name__}")
@@ -287,42 +400,29 @@ def _factor(pts, nrm, sm: ShadowMap, bias, slope_bias, max_slope, k):
         to_light = -torch.as_tensor(sm.cameras[0].R[2], dtype=dtype, device=pts.device).expand_as(pts)
     else:
         to_light = torch.as_tensor(sm.cameras[0].eye, dtype=dtype, device=pts.device) - pts
-    r = (k - 1) // 2
-    offsets = torch.arange(-r, r + 1, device=pts.device)
-    depth = sm.depth.to(dtype).reshape(-1)                                   # (C H W,)
+    sloped = nrm is not None and slope_bias > 0
+    slope = slope_bias * (k + 1) / 2 if sloped else 0.0                      # PCF reaches (k - 1) / 2 further
+    depth = sm.depth.to(dtype)                                               # (C, H, W)
     for c, cam in enumerate(sm.cameras):
         sel = (face == c).nonzero().squeeze(1)
         if sel.numel() == 0:
             continue
         p = pts.index_select(0, sel)
         cam = cam.to(dtype=dtype)
-        xy, z = cam.project(p)                                               # (M, 2), (M,)
+        x, y, z = light_space(p, cam).unbind(1)                              # (M,) each
         fx = cam.K[0, 0]
         texel = (1 / fx).expand_as(z) if cam.orthographic else z / fx        # world width of a texel
-        total = torch.full_like(z, bias)
-        if nrm is not None and slope_bias > 0:
-            n = nrm.index_select(0, sel)
-            l = to_light.index_select(0, sel)
-            cos = ((n * l).sum(-1).abs() / (n.norm(dim=-1) * l.norm(dim=-1)).clamp_min(1e-30)).clamp(0, 1)
-            sin = (1 - cos * cos).clamp_min(0).sqrt()
-            tan = torch.where(sin <= max_slope * cos, sin / cos.clamp_min(1e-30), torch.full_like(cos, max_slope))
-            total = total + slope_bias * (k + 1) / 2 * texel.abs() * tan
-        z_test = z - total
-        x, y = xy[:, 0], xy[:, 1]
+        tan = (_tan_theta(nrm.index_select(0, sel), to_light.index_select(0, sel), max_slope) if sloped
+               else torch.zeros_like(z))
         inside = (z >= cam.near) & (z <= cam.far) & (x >= 0) & (x <= W) & (y >= 0) & (y <= H)
         inside &= torch.isfinite(x) & torch.isfinite(y)
-        col = torch.where(inside, x, torch.zeros_like(x)).floor().long().clamp(0, W - 1)   # x = W: the last
-        row = torch.where(inside, y, torch.zeros_like(y)).floor().long().clamp(0, H - 1)
-        lit = torch.zeros_like(z)
-        for dy in offsets.tolist():
-            for dx in offsets.tolist():
-                rr, cc = row + dy, col + dx
-                valid = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W)
-                if sm.kind == "point":                                       # clamp to the face's edge
-                    rr, cc, valid = rr.clamp(0, H - 1), cc.clamp(0, W - 1), torch.ones_like(valid)
-                stored = depth.index_select(0, (c * H + rr.clamp(0, H - 1)) * W + cc.clamp(0, W - 1))
-                lit += (~valid | ~(z_test > stored)).to(dtype)
-        out[sel] = torch.where(inside, lit / (k * k), torch.ones_like(lit))
+        seen = inside.nonzero().squeeze(1)
+        z_test = biased_depth(z.index_select(0, seen), texel.abs().index_select(0, seen),
+                              tan.index_select(0, seen), bias, slope)
+        xy = torch.stack([x, y], 1).index_select(0, seen)
+        lit = torch.ones_like(z)
+        lit[seen] = pcf(depth[c], xy, z_test, k, outside="clamp" if sm.kind == "point" else "lit")
+        out[sel] = lit
     return out
 
 

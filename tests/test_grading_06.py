@@ -1,13 +1,15 @@
 """Lecture 06's graded tasks (course/grading/lecture06.py): the references score full marks, a solution written
 as a student would scores full marks without calling them, typical mistakes lose points with the diagnosis a
 student can act on, a function that calls the package's reference scores 0, and the explicit formulas the
-checks of 6.2 and 6.3 use agree with course.shadows.shadow_factor on a real shadow map."""
+checks of 6.2 and 6.3 use to name mistakes agree with the references, course.shadows' building blocks of
+shadow_factor."""
 import pytest
 import torch
 
 from course.camera import project_points
 from course.grading import TASKS, run_check, tasks_for_lecture
-from course.grading.lecture06 import _biased_lit, _light_space, _pcf
+from course import shadows
+from course.grading.lecture06 import _biased_lit, _light_space, _pcf, _pcf_mistake
 from course.models import plane
 from course.shading import DirectionalLight
 from course.shadows import shadow_factor, shadow_map
@@ -87,16 +89,16 @@ def lit_via_shadow_factor(z, stored, texel, tan_theta, bias, slope_bias):
 
 
 def pcf_outside_dark(depth_map, coords, depths, k):
-    return _pcf(depth_map, coords, depths, k, outside="shadow").to(depth_map.dtype)
+    return _pcf_mistake(depth_map, coords, depths, k, outside="shadow").to(depth_map.dtype)
 
 
 def pcf_filters_depths(depth_map, coords, depths, k):
-    return _pcf(depth_map, coords, depths, k, filter_depths=True).to(depth_map.dtype)
+    return _pcf_mistake(depth_map, coords, depths, k, filter_depths=True).to(depth_map.dtype)
 
 
 def pcf_swapped(depth_map, coords, depths, k):
     return pcf(depth_map, coords.flip(-1), depths, k) if depth_map.shape[0] == depth_map.shape[1] else \
-        _pcf(depth_map, coords, depths, k, swap=True).to(depth_map.dtype)
+        _pcf_mistake(depth_map, coords, depths, k, swap=True).to(depth_map.dtype)
 
 
 def pcf_shadowed(depth_map, coords, depths, k):
@@ -144,7 +146,26 @@ def test_a_typical_mistake_loses_points_with_a_useful_message(task_id, impl, wor
     assert words in result.message, result.message
 
 
-@pytest.mark.parametrize("task_id, impl", [("6.1", light_space_via_project), ("6.2", lit_via_shadow_factor)])
+def light_space_via_reference(points, K, R, t, orthographic):
+    return shadows.light_space(points, K, R, t, orthographic)
+
+
+def lit_via_reference(z, stored, texel, tan_theta, bias, slope_bias):
+    return shadows.biased_lit(z, stored, texel, tan_theta, bias, slope_bias)
+
+
+def lit_via_biased_depth(z, stored, texel, tan_theta, bias, slope_bias):
+    return shadows.biased_depth(z, texel, tan_theta, bias, slope_bias) <= stored
+
+
+def pcf_via_reference(depth_map, coords, depths, k):
+    return shadows.pcf(depth_map, coords, depths, k)
+
+
+@pytest.mark.parametrize("task_id, impl", [("6.1", light_space_via_project), ("6.1", light_space_via_reference),
+                                           ("6.2", lit_via_shadow_factor), ("6.2", lit_via_reference),
+                                           ("6.2", lit_via_biased_depth), ("6.3", pcf_via_reference)],
+                         ids=lambda v: getattr(v, "__name__", v))
 def test_calling_the_reference_scores_zero(task_id, impl):
     result = run_check(task_id, impl)
     assert result.points == 0 and "calls" in result.message, result.message
@@ -158,7 +179,7 @@ def test_not_attempted_scores_zero():
 
 
 @pytest.mark.parametrize("k", [1, 3, 5])
-def test_the_checks_formulas_are_shadow_factors(k):
+def test_shadow_factor_is_the_references_in_a_row(k):
     # a tilted ground under a tilted light at 32 texels: acne and an outline, so both outcomes occur
     ground = plane(4.0, dtype=torch.float64)
     sm = shadow_map(ground, DirectionalLight((0.6, -1.0, 0.3)), 32)
@@ -172,6 +193,7 @@ def test_the_checks_formulas_are_shadow_factors(k):
     expected = shadow_factor(pts, None, sm, bias=bias, pcf=k)
     got = _pcf(sm.depth[0], xyz[:, :2], xyz[:, 2] - bias, k)
     assert torch.equal(got, expected)
+    assert torch.equal(_pcf_mistake(sm.depth[0], xyz[:, :2], xyz[:, 2] - bias, k), expected)   # the formula
     assert expected.unique().numel() >= 2                                     # lit and (partly) shadowed
     if k == 1:
         row, col = xyz[:, 1].floor().long(), xyz[:, 0].floor().long()
@@ -181,5 +203,6 @@ def test_the_checks_formulas_are_shadow_factors(k):
 
 
 def test_the_checks_are_registered_with_references():
-    assert TASKS["6.1"].reference == ("course.camera", "project_points")
-    assert TASKS["6.2"].reference == TASKS["6.3"].reference == ("course.shadows", "shadow_factor")
+    assert TASKS["6.1"].reference == ("course.shadows", "light_space")
+    assert TASKS["6.2"].reference == ("course.shadows", "biased_lit")
+    assert TASKS["6.3"].reference == ("course.shadows", "pcf")

@@ -11,8 +11,9 @@ import torch
 from course.mesh import Mesh
 from course.models import cube, plane
 from course.shading import DirectionalLight, PointLight
-from course.shadows import (CUBE_FACES, ShadowMap, SpotLight, area_light_samples, area_shadow_factor,
-                            light_camera, shadow_factor, shadow_map)
+from course.camera import Camera
+from course.shadows import (CUBE_FACES, ShadowMap, SpotLight, area_light_samples, area_shadow_factor, biased_depth,
+                            biased_lit, light_camera, light_space, pcf, shadow_factor, shadow_map)
 
 UP = (0.0, 1.0, 0.0)
 
@@ -258,6 +259,102 @@ def test_area_light_with_cube_maps_matches_one_sided_maps():
     spot_f = area_shadow_factor(p, n, meshes, s, resolution=128, light_normal=(0.0, -1.0, 0.0))
     assert float((cube_f - spot_f).abs().mean()) < 0.03
     assert cube_f[0] == 0 and cube_f[-1] == 1
+
+
+# ------------------------------------------------------------------- pass 2's building blocks, by hand
+
+F64 = torch.float64
+INF = float("inf")
+
+
+def test_light_space_by_hand():
+    K = torch.tensor([[10.0, 0.0, 5.0], [0.0, 20.0, 6.0], [0.0, 0.0, 1.0]], dtype=F64)
+    R, t = torch.eye(3, dtype=F64), torch.tensor([0.0, 0.0, 2.0], dtype=F64)
+    p = torch.tensor([[1.0, 0.5, 2.0], [0.0, 0.0, 0.0]], dtype=F64)        # camera space (1, .5, 4), (0, 0, 2)
+    persp = light_space(p, K, R, t, False)
+    assert persp.dtype == F64 and torch.equal(persp, torch.tensor([[7.5, 8.5, 4.0], [5.0, 6.0, 2.0]], dtype=F64))
+    ortho = light_space(p, K, R, t, True)                                   # no division by depth
+    assert torch.equal(ortho, torch.tensor([[15.0, 16.0, 4.0], [5.0, 6.0, 2.0]], dtype=F64))
+    cam = Camera(K, R, t, 16, 16, 0.1, 10.0, False)                         # a Camera: its own K, R, t and mode
+    assert torch.equal(light_space(p, cam), persp)
+    sm = shadow_map(scene(), SpotLight((0.0, 2.0, 0.0), (0.0, -1.0, 0.0), 70.0), 32)
+    pts, _, _ = ground_grid(n=5)
+    xy, z = sm.camera.project(pts)
+    assert torch.equal(light_space(pts, sm.camera), torch.cat([xy, z[:, None]], 1))
+
+
+def test_biased_depth_and_biased_lit_by_hand():
+    # total bias = 0.25 + 1.0 * 0.125 * tan θ: 0.25 for tan θ = 0, 0.5 for tan θ = 2 (exact in binary)
+    z = torch.tensor([1.0, 1.5, 1.625, 5.0], dtype=F64)
+    stored = torch.tensor([1.0, 1.0, 1.0, INF], dtype=F64)                  # the last texel is empty
+    tan = torch.tensor([0.0, 2.0, 2.0, 0.0], dtype=F64)
+    assert torch.equal(biased_depth(z, 0.125, tan, 0.25, 1.0), torch.tensor([0.75, 1.0, 1.125, 4.75], dtype=F64))
+    lit = biased_lit(z, stored, torch.full_like(z, 0.125), tan, 0.25, 1.0)
+    assert lit.dtype == torch.bool and lit.tolist() == [True, True, False, True]   # exactly at stored: lit
+    assert biased_lit(z, stored, 0.125, tan, 0.0, 0.0).tolist() == [True, False, False, True]
+    assert biased_lit(z[:0], stored[:0], 0.1, 0.0, 0.1, 1.0).shape == (0,)
+
+
+def test_pcf_by_hand():
+    depth = torch.tensor([[1.0, INF, 1.0], [INF, 1.0, INF], [1.0, 1.0, 1.0]], dtype=F64)
+    coords = torch.tensor([[1.5, 1.5], [0.2, 0.2], [3.0, 0.5], [1.5, 1.5]], dtype=F64)
+    depths = torch.tensor([2.0, 2.0, 0.5, 1.0], dtype=F64)
+    assert pcf(depth, coords, depths, 1).tolist() == [0.0, 0.0, 1.0, 1.0]  # x = W reads the last column
+    three = pcf(depth, coords, depths, 3)
+    assert three.dtype == F64
+    # centre: the 3 empty texels of 9; corner: 5 neighbours outside (lit) + 2 empty of the 4 inside
+    assert torch.allclose(three, torch.tensor([3 / 9, 7 / 9, 1.0, 1.0], dtype=F64), rtol=0, atol=1e-15)
+    # a cube-map face clamps instead: the corner reads (0, 0) four times, (0, 1) and (1, 0) twice, (1, 1) once
+    assert float(pcf(depth, coords[1:2], depths[1:2], 3, outside="clamp")[0]) == 4 / 9
+    assert pcf(depth.float(), coords, depths, 3).dtype == torch.float32     # depth_map's dtype
+
+
+@pytest.mark.parametrize("k", [1, 3])
+@pytest.mark.parametrize("light", [DirectionalLight((0.6, -1.0, 0.3)),
+                                   SpotLight((0.3, 2.0, 0.1), (0.0, -1.0, 0.0), 90.0)], ids=["directional", "spot"])
+def test_shadow_factor_is_light_space_then_bias_then_pcf(light, k):
+    sm = shadow_map(scene(F64), light, 48)
+    pts, _, _ = ground_grid(n=41, half=1.5, dtype=F64)
+    x, y, z = light_space(pts, sm.camera).unbind(1)
+    fx = sm.camera.K[0, 0]
+    texel = 1 / fx if sm.camera.orthographic else z / fx
+    z_test = biased_depth(z, texel, 0.0, 0.01, 0.0)
+    expected = pcf(sm.depth[0], torch.stack([x, y], 1), z_test, k)
+    got = shadow_factor(pts, None, sm, bias=0.01, pcf=k)
+    assert torch.equal(got, expected) and got.unique().numel() >= 2
+    if k == 1:
+        stored = sm.depth[0, y.floor().long().clamp(0, 47), x.floor().long().clamp(0, 47)]
+        assert torch.equal(biased_lit(z, stored, texel, 0.0, 0.01, 0.0).to(F64), got)
+
+
+def test_building_blocks_reject_bad_inputs():
+    K, R, t = torch.eye(3), torch.eye(3), torch.zeros(3)
+    with pytest.raises(TypeError, match="needs a Camera, or K, R and t"):
+        light_space(torch.zeros(2, 3), K)
+    cam = Camera(K, R, t, 4, 4, 0.1, 10.0, False)
+    with pytest.raises(TypeError, match="takes no R or t"):
+        light_space(torch.zeros(2, 3), cam, R, t)
+    with pytest.raises(ValueError, match="points must have shape"):
+        light_space(torch.zeros(2, 2), K, R, t)
+    z = torch.ones(3)
+    with pytest.raises(ValueError, match="z must have shape"):
+        biased_lit(torch.ones(3, 1), torch.ones(3, 1), 0.1, 0.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="stored must have one depth per point"):
+        biased_lit(z, torch.ones(2), 0.1, 0.0, 0.0, 0.0)
+    depth = torch.ones(4, 4)
+    for k in (0, 2, -1, 1.5, True):
+        with pytest.raises(ValueError, match="k must be an odd integer"):
+            pcf(depth, torch.zeros(3, 2), z, k)
+    with pytest.raises(ValueError, match=r"depth_map must be one \(H, W\) map"):
+        pcf(depth[None], torch.zeros(3, 2), z, 1)
+    with pytest.raises(ValueError, match="coords must have shape"):
+        pcf(depth, torch.zeros(3, 3), z, 1)
+    with pytest.raises(ValueError, match="coords contains NaN"):
+        pcf(depth, torch.full((3, 2), float("nan")), z, 1)
+    with pytest.raises(ValueError, match="depths must have one value per point"):
+        pcf(depth, torch.zeros(3, 2), torch.ones(4), 1)
+    with pytest.raises(ValueError, match="outside must be 'lit' or 'clamp'"):
+        pcf(depth, torch.zeros(3, 2), z, 1, outside="dark")
 
 
 # --------------------------------------------------------------------------------- precision and inputs

@@ -4,18 +4,19 @@ Each check runs the student's function next to a reference on fixed, seeded-rand
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``; nothing here is public.
 
-References: 6.1 is ``course.camera.project_points`` with its two results stacked as (x, y, depth), the
-projection ``course.shadows.shadow_factor`` uses to look a point up in the light's map. ``course.shadows`` has
-no standalone depth comparison or PCF function (both live inside ``shadow_factor``), so 6.2 and 6.3 are
-checked against the explicit formulas below, ``_biased_lit`` and ``_pcf``, which are the comparison and the
-k×k filter of ``shadow_factor``'s docstring (tests/test_grading_06.py checks that they agree with it); a
-graded function that calls ``shadow_factor`` scores 0.
+References: the three building blocks ``course.shadows.shadow_factor`` is made of, each called with the
+student's signature: 6.1 ``course.shadows.light_space`` (``project_points`` with its two results side by
+side, the lookup of pass 2), 6.2 ``course.shadows.biased_lit`` (the comparison with the two-part bias), 6.3
+``course.shadows.pcf`` (the k×k filter; a neighbour outside the map is lit). ``_light_space_variants``,
+``_lit_variants`` and ``_pcf_mistake`` give the typical mistakes' answers, to say what went wrong. A graded
+function that reaches its reference, or another package function doing the task's work (``project_points``,
+``shadow_factor`` ...), scores 0.
 """
 from __future__ import annotations
 
 import torch
 
-from .helpers import _call, _diagnose, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _diagnose, _ref, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
@@ -24,9 +25,9 @@ __all__: list[str] = []          # nothing public: the checks are reached throug
 # --------------------------------------------------------------------------------- 6.1 light space
 
 def _light_space(points, K, R, t, orthographic):
-    from course.camera import project_points
-    xy, z = project_points(points, K, R, t, orthographic=orthographic)
-    return torch.cat([xy, z[:, None]], 1)
+    """The reference, ``course.shadows.light_space``: (N, 3) columns (x, y, depth)."""
+    with torch.no_grad():
+        return _ref("course.shadows", "light_space")(points, K, R, t, orthographic)
 
 
 def _light_space_variants(points, K, R, t, orthographic) -> list:
@@ -83,9 +84,10 @@ def _points(n, seed, dtype, scale=1.2, center=(0.2, 0.4, -0.1)):
     return p.to(dtype)
 
 
-@task("6.1", "light_space", points=3, reference=("course.camera", "project_points"))
+@task("6.1", "light_space", points=3, reference=("course.shadows", "light_space"))
 def _check_light_space(impl):
-    require(forbidden_call(impl, "light_space", [("course.camera", "Camera.project"),
+    require(forbidden_call(impl, "light_space", [("course.camera", "project_points"),
+                                                  ("course.camera", "Camera.project"),
                                                   ("course.camera", "world_to_camera")]))
 
     def ortho():
@@ -119,10 +121,9 @@ def _check_light_space(impl):
 # --------------------------------------------------------------------------- 6.2 the biased comparison
 
 def _biased_lit(z, stored, texel, tan_theta, bias, slope_bias):
-    """Lit where the point's depth, moved toward the light by bias + slope_bias * texel * tan θ, is not behind
-    the stored depth: ``not (z - total > stored)`` (so a stored +inf, an empty texel, is lit)."""
-    total = bias + slope_bias * texel * tan_theta
-    return ~(z - total > stored)
+    """The reference, ``course.shadows.biased_lit``: lit where ``not (z - total > stored)``, total = bias +
+    slope_bias * texel * tan θ (so a stored +inf, an empty texel, is lit)."""
+    return _ref("course.shadows", "biased_lit")(z, stored, texel, tan_theta, bias, slope_bias)
 
 
 def _lit_variants(z, stored, texel, tan_theta, bias, slope_bias) -> list:
@@ -169,8 +170,11 @@ def _lit_case(n, seed, dtype, bias=0.02, slope_bias=1.5):
     return tuple(x.to(dtype) for x in (z, stored, texel, tan_theta)) + (bias, slope_bias)
 
 
-@task("6.2", "biased_lit", points=3, reference=("course.shadows", "shadow_factor"))
+@task("6.2", "biased_lit", points=3, reference=("course.shadows", "biased_lit"))
 def _check_biased_lit(impl):
+    require(forbidden_call(impl, "biased_lit", [("course.shadows", "shadow_factor"),
+                                                ("course.shadows", "biased_depth"), ("course.shadows", "pcf")]))
+
     def basic():
         _run_lit(impl, _lit_case(200, 71, torch.float64), "points near the threshold, bias 0.02, slope_bias 1.5")
         _run_lit(impl, _lit_case(100, 72, torch.float64, 0.0, 3.0), "bias 0, slope_bias 3")
@@ -203,11 +207,17 @@ def _texels(coords):
     return coords[:, 1].floor().long(), coords[:, 0].floor().long()        # (row, col) of the texel holding (x, y)
 
 
-def _pcf(depth_map, coords, depths, k, outside="lit", divide="all", offsets=None, swap=False, texel="floor",
-         filter_depths=False):
-    """The fraction of the k×k texels around each point's texel whose stored depth is not nearer than the
-    point's: ``mean(not (depth > stored))``; a neighbour outside the map is lit. The other arguments give the
-    typical mistakes' answers."""
+def _pcf(depth_map, coords, depths, k):
+    """The reference, ``course.shadows.pcf``: the fraction of the k×k texels around each point's texel whose
+    stored depth is not nearer than the point's; a neighbour outside the map is lit. (N,) in depth_map's dtype."""
+    with torch.no_grad():
+        return _ref("course.shadows", "pcf")(depth_map, coords, depths, k)
+
+
+def _pcf_mistake(depth_map, coords, depths, k, outside="lit", divide="all", offsets=None, swap=False,
+                 texel="floor", filter_depths=False):
+    """PCF written out in float64, with switches that give the typical mistakes' answers (``_pcf_variants``);
+    with the defaults it is the reference's formula: ``mean(not (depth > stored))``, outside the map lit."""
     H, W = depth_map.shape
     if texel == "floor":
         row, col = _texels(coords)
@@ -241,17 +251,18 @@ def _pcf(depth_map, coords, depths, k, outside="lit", divide="all", offsets=None
 
 def _pcf_variants(depth_map, coords, depths, k) -> list:
     ref = _pcf(depth_map, coords, depths, k)
-    return [(_pcf(depth_map, coords, depths, k, outside="shadow"), "a neighbour outside the map counts as lit "
+    mistake = lambda **how: _pcf_mistake(depth_map, coords, depths, k, **how)      # noqa: E731
+    return [(mistake(outside="shadow"), "a neighbour outside the map counts as lit "
              "(the map cannot see it): add 1 for it, as for a lit texel"),
-            (_pcf(depth_map, coords, depths, k, outside="shadow", divide="valid"), "divide by k * k, every "
+            (mistake(outside="shadow", divide="valid"), "divide by k * k, every "
              "neighbour counted, the ones outside the map as lit"),
-            (_pcf(depth_map, coords, depths, k, filter_depths=True), "PCF filters the comparisons, not the depths: "
+            (mistake(filter_depths=True), "PCF filters the comparisons, not the depths: "
              "compare the point with each of the k × k stored depths and average the 0/1 results"),
-            (_pcf(depth_map, coords, depths, k, swap=True), "rows and columns are swapped: coords are (x, y), the "
+            (mistake(swap=True), "rows and columns are swapped: coords are (x, y), the "
              "texel is row floor(y), column floor(x)"),
-            (_pcf(depth_map, coords, depths, k, texel="round"), "the texel holding (x, y) is (floor(y), floor(x)): "
+            (mistake(texel="round"), "the texel holding (x, y) is (floor(y), floor(x)): "
              "texel (i, j) covers [j, j + 1) × [i, i + 1)"),
-            (_pcf(depth_map, coords, depths, k, offsets=list(range(k))), "the window is centred on the point's "
+            (mistake(offsets=list(range(k))), "the window is centred on the point's "
              "texel: offsets -(k - 1) / 2 … (k - 1) / 2"),
             (1 - ref, "that is the shadowed fraction: return the lit fraction (1 where nothing is nearer)")]
 
@@ -259,7 +270,7 @@ def _pcf_variants(depth_map, coords, depths, k) -> list:
 def _run_pcf(impl, depth_map, coords, depths, k, what):
     name = f"pcf (k = {k}, {what})"
     got = to_tensor(_call(impl, depth_map, coords, depths, k), name)
-    expected = _pcf(depth_map, coords, depths, k).to(depth_map.dtype)
+    expected = _pcf(depth_map, coords, depths, k)
     require(_diagnose(got, expected, name, _pcf_variants(depth_map, coords, depths, k), check_dtype=True,
                       atol=1e-6, rtol=1e-6))
 
@@ -273,8 +284,10 @@ def _pcf_case(H, W, n, seed, dtype):
     return depth.to(dtype), coords.to(dtype), depths.to(dtype)
 
 
-@task("6.3", "pcf", points=3, reference=("course.shadows", "shadow_factor"))
+@task("6.3", "pcf", points=3, reference=("course.shadows", "pcf"))
 def _check_pcf(impl):
+    require(forbidden_call(impl, "pcf", [("course.shadows", "shadow_factor")]))
+
     def one_and_three():
         depth, coords, depths = _pcf_case(9, 12, 60, 81, torch.float64)
         for k in (1, 3):
