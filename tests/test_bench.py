@@ -1,5 +1,6 @@
 """The benchmark runs and measures what it says; the OpenGL oracle agrees with the rasterizer."""
 import json
+import math
 import subprocess
 import sys
 
@@ -157,3 +158,43 @@ def test_bench_shadows_rows_and_plot(tmp_path, capsys):
     assert all(r["ms"] > 0 for r in rows)
     assert (tmp_path / "p.png").stat().st_size > 1000
     assert "teapot" in capsys.readouterr().out
+
+
+def _scaling_rows(embree: bool):
+    """Synthetic bench_raytrace rows: brute force linear in the faces, the BVH logarithmic."""
+    rows = []
+    for name, faces in (("S4", 1280), ("S1", 20480), ("S2", 327680)):
+        rows.append(dict(scene=name, faces=faces, kind="build", rays=0, ms=5.0, embree_ms=1.0 if embree else None))
+        for kind, rays in (("primary", 1000), ("shadow", 800), ("incoherent", 500)):
+            ms = rays * 1e-3 * math.log2(faces)                              # µs per ray = log2(faces)
+            rows.append(dict(scene=name, faces=faces, kind=kind, rays=rays, ms=ms, brute_ms_per_ray=faces * 1e-6,
+                             embree_ms=ms / 4 if embree else None))
+    return rows
+
+
+@pytest.mark.parametrize("embree", [False, True])
+def test_bench_raytrace_scaling_plot_from_rows(tmp_path, embree):
+    """plot_scaling draws time per ray against faces on log axes from the bench's rows, without running it."""
+    import matplotlib.pyplot as plt
+    from course.bench.raytrace import plot_scaling
+    fig = plot_scaling(_scaling_rows(embree), tmp_path / "scaling.png")
+    try:
+        ax = fig.axes[0]
+        lines = {ln.get_label(): ln for ln in ax.get_lines()}
+        expected = {"brute force, primary", "brute force, incoherent", "BVH, primary", "BVH, incoherent",
+                    "∝ faces"} | ({"Embree, primary", "Embree, incoherent"} if embree else set())
+        assert set(lines) == expected
+        assert ax.get_xscale() == ax.get_yscale() == "log"
+        assert list(lines["BVH, primary"].get_xdata()) == [1280, 20480, 327680]          # sorted by faces
+        assert lines["brute force, incoherent"].get_ydata() == pytest.approx([1.28, 20.48, 327.68])   # µs
+        assert lines["BVH, incoherent"].get_ydata() == pytest.approx([math.log2(f) for f in (1280, 20480, 327680)])
+        assert list(lines["∝ faces"].get_ydata()) == pytest.approx(lines["brute force, primary"].get_ydata())
+        assert (tmp_path / "scaling.png").stat().st_size > 1000
+    finally:
+        plt.close(fig)
+
+
+def test_bench_raytrace_scaling_plot_rejects_rows_without_rays():
+    from course.bench.raytrace import plot_scaling
+    with pytest.raises(ValueError, match="no primary or incoherent rows"):
+        plot_scaling([dict(scene="S4", faces=1280, kind="build", rays=0, ms=3.0)])

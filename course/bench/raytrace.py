@@ -1,4 +1,5 @@
-"""The ray-tracing benchmark: ``python -m course bench raytrace [--scenes S1 ...] [--scale F] [--vs embree]``.
+"""The ray-tracing benchmark: ``python -m course bench raytrace [--scenes S1 ...] [--scale F] [--vs embree]
+[--plot FILE]``.
 
 On the four standard scenes of ``bench raster`` (``course.bench.raster.scene``) and on ``thin``, a mix of long
 thin slivers and large flat triangles (the hard case for a BVH: big, overlapping boxes), it reports
@@ -17,6 +18,10 @@ thin slivers and large flat triangles (the hard case for a BVH: big, overlapping
 and commit (``EmbreeScene`` + ``TriangleMesh`` + the first query, which commits), ``run(..., query=
 "INTERSECT")`` for primary and incoherent rays, ``query="OCCLUDED"`` for shadow rays, float32, and prints the
 time ratio ours / Embree. Without embreex it is skipped with a message.
+
+``--plot FILE`` (default ``raytrace_scaling.png``, ``''`` for none) writes ``plot_scaling``'s figure: time per
+ray (µs) against face count, log-log, for brute force, the BVH and Embree (when run), primary and incoherent
+rays: brute force grows like the face count, the BVH's traversal about like its logarithm.
 """
 from __future__ import annotations
 
@@ -32,7 +37,7 @@ from .raster import scene as raster_scene
 from .timing import time_it, time_side_by_side
 
 __all__ = ["SCENES", "scene", "thin_scene", "brute_force", "measure", "bench_raytrace", "format_table",
-           "add_arguments", "run"]
+           "plot_scaling", "add_arguments", "run"]
 
 REPEAT = 3               # timed runs per measurement (these take seconds each)
 DESCRIPTION = "ray tracing: BVH build, primary / shadow / incoherent Mrays/s, vs brute force (and Embree)"
@@ -267,9 +272,73 @@ def format_table(rows) -> str:
     return "\n".join(lines)
 
 
+SCALING_KINDS = ("primary", "incoherent")              # the ray kinds plot_scaling draws
+
+
+def _us_per_ray(rows, kind: str, key: str) -> list[tuple[int, float, str]]:
+    """(faces, µs per ray, scene) of the ``kind`` rows that have ``key``, sorted by face count. key: "ms" (the
+    BVH), "embree_ms" or "brute_ms_per_ray" (already per ray)."""
+    pts = []
+    for r in rows:
+        if r.get("kind") != kind or not r.get(key) or not r.get("rays"):
+            continue
+        ms = r[key] if key == "brute_ms_per_ray" else r[key] / r["rays"]
+        pts.append((int(r["faces"]), 1e3 * ms, str(r["scene"])))
+    return sorted(pts)
+
+
+def plot_scaling(rows, path=None):
+    """Log-log figure of time per ray (µs) against face count, one line per method and ray kind.
+
+    rows: ``measure`` / ``bench_raytrace`` rows (dicts with ``scene``, ``faces``, ``kind``, ``rays``, ``ms``, and
+    where measured ``brute_ms_per_ray`` and ``embree_ms``). Draws, for the kinds in ``SCALING_KINDS`` (primary,
+    incoherent): "brute force, KIND" (dashed, ``brute_ms_per_ray``), "BVH, KIND" (solid, ``ms / rays``) and,
+    when the rows have Embree times, "Embree, KIND" (dotted), each point labelled with its scene; and a grey
+    guide "∝ faces" through the first brute-force point, the slope brute force should follow. path: where to
+    save it (None: don't). Returns the matplotlib figure. Raises ValueError when no row has rays to plot.
+    """
+    import matplotlib.pyplot as plt
+    rows = list(rows)
+    methods = (("brute force", "brute_ms_per_ray", "--", "s"), ("BVH", "ms", "-", "o"),
+               ("Embree", "embree_ms", ":", "^"))
+    lines = []                                                              # (label, points, style, marker, colour)
+    for m, (method, key, style, marker) in enumerate(methods):
+        for k, kind in enumerate(SCALING_KINDS):
+            pts = _us_per_ray(rows, kind, key)
+            if pts:
+                lines.append((f"{method}, {kind}", pts, style, marker, f"C{2 * m + k}"))
+    if not lines:
+        raise ValueError("plot_scaling: no primary or incoherent rows with rays and times to plot "
+                         "(expected the rows of measure() / bench_raytrace())")
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for label, pts, style, marker, color in lines:
+        faces, us = [p[0] for p in pts], [p[1] for p in pts]
+        ax.plot(faces, us, ls=style, marker=marker, color=color, label=label)
+        for f, u, name in pts:
+            ax.annotate(name, (f, u), fontsize=7, xytext=(3, 3), textcoords="offset points", color=color)
+    brute = next((pts for label, pts, *_ in lines if label.startswith("brute force")), None)
+    all_faces = sorted({p[0] for _, pts, *_ in lines for p in pts})
+    if brute and all_faces[-1] > all_faces[0]:
+        f0, u0 = brute[0][:2]
+        ax.plot(all_faces, [u0 * f / f0 for f in all_faces], color="0.6", lw=1, ls="-.", label="∝ faces")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("faces")
+    ax.set_ylabel("time per ray (µs)")
+    ax.set_title("ray tracing: time per ray against scene size")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    if path:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
 def bench_raytrace(names=SCENES, repeat: int = 3, scale: float = 0.25, n_incoherent: int = 1 << 15,
-                   brute_pairs: int = 1 << 21, vs_embree: bool = False, out=print) -> list[dict]:
-    """The whole benchmark: one table, rows per scene and kind."""
+                   brute_pairs: int = 1 << 21, vs_embree: bool = False, plot: str | None = None,
+                   out=print) -> list[dict]:
+    """The whole benchmark: one table, rows per scene and kind; with ``plot`` a path, ``plot_scaling``'s
+    figure saved there (the command line's ``--plot`` defaults to ``raytrace_scaling.png``)."""
     embree = None
     if vs_embree:
         embree, msg = _embree()
@@ -289,6 +358,9 @@ def bench_raytrace(names=SCENES, repeat: int = 3, scale: float = 0.25, n_incoher
         for r in rows:
             if r["scene"] == "S1" and r["kind"] == "primary" or r["scene"] == "S2" and r["kind"] == "build":
                 out(f"  {r['scene']} {r['kind']}: ours / Embree = {r['ratio']:.1f}")
+    if plot:
+        plot_scaling(rows, plot)
+        out(f"\nscaling plot written to {plot}")
     return rows
 
 
@@ -301,8 +373,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--brute-pairs", type=int, default=1 << 21,
                         help="ray-triangle pairs of the brute-force subset (rays = this / faces)")
     parser.add_argument("--vs", choices=["embree"], help="also trace with Embree (embreex) and report the ratio")
+    parser.add_argument("--plot", default="raytrace_scaling.png",
+                        help="where to save the time-per-ray against faces plot ('' for none)")
 
 
 def run(args) -> list[dict]:
     return bench_raytrace(args.scenes, args.repeat, args.scale, args.incoherent, args.brute_pairs,
-                          vs_embree=args.vs == "embree")
+                          vs_embree=args.vs == "embree", plot=args.plot or None)
