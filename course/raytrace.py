@@ -32,13 +32,22 @@ The flat tensors: ``boxes`` (M, 2, 3) min and max corners, ``left`` (M,) first c
 ``first`` / ``count`` (M,) the leaf's range in ``order`` (count 0 for internal nodes), ``order`` (F,) the
 face id of each sorted slot, ``tris`` (F, 3, 3) the sorted triangles.
 
-**Traversal of many rays at once** (``BVH.intersect``). The state is a frontier of (ray, node) pairs, all
-processed together per step: leaf pairs expand to (ray, triangle) candidates that go through the watertight
-test, and each ray keeps its closest hit with a ``scatter_reduce`` amin on t (ties go to the lower face id);
-internal pairs expand to their two children, which are kept when the ray's segment [t_min, best t] meets the
-child's box (the slab test). The frontier empties after about as many steps as the tree is deep. Rays whose
-frontier is empty are finished and drop out by themselves; with ``any_hit`` a ray's pairs are dropped at its
-first hit (enough for shadows). Rays are processed in chunks so memory stays bounded.
+**Traversal of many rays at once** (``BVH.intersect``), in three vectorised stages with no Python loop per
+ray or per node visit:
+
+1. *Packets down the tree.* Consecutive rays go down together in packets of 16 (``raycast`` orders its
+   pixels in 4 x 4 tiles), each packet bounded by the box of its origins and the interval of its inverse
+   directions. A frontier of (packet, node) pairs is processed level by level: a node is kept when some ray
+   of the packet may meet its box (``_beam_box``, a slab test on intervals that never drops a box a ray
+   meets), and the leaves reached are collected. One box test then serves 16 rays. Rays that are not
+   coherent (random directions) are split into packets of one ray, the plain per-ray frontier.
+2. *Rays into leaves.* Each (packet, leaf) pair becomes one (ray, leaf) pair per ray of the packet, kept
+   when that ray's segment [t_min, t_max] meets the leaf's box, with the distance at which it enters it.
+3. *Nearest leaf first.* In rounds, every ray tests the triangles of its nearest remaining leaf with the
+   watertight test and keeps its closest hit (a ``scatter_reduce`` amin on t; ties go to the lower face
+   id). A leaf whose box the ray enters beyond its closest hit so far cannot hold a closer hit and is
+   dropped, so most rays finish in a round or two; with ``any_hit`` a ray stops at its first hit (enough
+   for shadows). Rays are processed in chunks so memory stays bounded.
 """
 from __future__ import annotations
 
@@ -52,6 +61,9 @@ from .tensors import as_tensor
 
 __all__ = ["intersect_triangles", "moller_trumbore", "ray_box", "morton_codes", "BVH", "Hits", "raycast", "visible",
            "rectangle_light_samples", "disk_light_samples"]
+
+PACKET = 16             # rays per packet in BVH.intersect (a 4 x 4 pixel tile of primary rays)
+PACKET_SPREAD = 0.05    # a packet stays together while its unit directions differ by at most this per component
 
 
 # ---------------------------------------------------------------------------------------- input checks
@@ -235,6 +247,7 @@ class BVH:
             self.boxes, self.left, self.first, self.count = verts.new_zeros((0, 2, 3)), z, z, z
             self.order, self.tris, self.depth, self._slot = z, tris, 0, z
             self.bounds = verts.new_zeros((2, 3))
+            self._centre, self._half, self._diag = self.bounds[:0].double(), self.bounds[:0].double(), 0.0
             return
         codes = morton_codes(tris.mean(1))
         codes, order = torch.sort(codes, stable=True)
@@ -294,6 +307,9 @@ class BVH:
                 boxes_max[nodes] = torch.maximum(boxes_max[c], boxes_max[c + 1])
         self.boxes = torch.stack([boxes_min, boxes_max], 1)                 # (M, 2, 3)
         self.bounds = self.boxes[0]
+        lo, hi = boxes_min.double(), boxes_max.double()                     # (M, 3) each, for traversal:
+        self._centre, self._half = (lo + hi) / 2, (hi - lo) / 2             # centre ± half is exact
+        self._diag = float((self.bounds[1] - self.bounds[0]).norm())
         self._slot = torch.empty_like(self.order)
         self._slot[self.order] = torch.arange(F, device=dev)                # slot of each face id
 
@@ -304,13 +320,18 @@ class BVH:
     # ------------------------------------------------------------------------------------- traversal
 
     def intersect(self, origins, directions, *, t_min=0.0, t_max=math.inf, any_hit: bool = False,
-                  chunk: int = 1 << 16) -> Hits:
+                  packet: int = PACKET, chunk: int = 1 << 16) -> Hits:
         """The closest hit of every ray (or any hit, ``any_hit=True``) with t in [t_min, t_max].
 
         origins, directions: (N, 3) world space (directions need not be unit: t is in their units);
         t_min, t_max: floats or (N,) tensors. Computed in the promoted dtype of the rays and the mesh.
         Ties in t go to the lower face id. Returns ``Hits`` (face_id (N,), t (N,), bary (N, 3)).
+        packet: rays per packet (consecutive rays go down the tree together when they are coherent, see
+        ``_traverse``); order coherent rays next to each other (``raycast`` orders pixels in 4 x 4 tiles).
+        1 traces every ray alone. The hits do not depend on it.
         """
+        if int(packet) < 1:
+            raise ValueError(f"packet must be >= 1, got {packet}")
         o = as_tensor(origins, name="origins")
         d = as_tensor(directions, name="directions")
         dtype = torch.promote_types(torch.promote_types(o.dtype, d.dtype), self.dtype)
@@ -328,10 +349,11 @@ class BVH:
         bary = torch.zeros((N, 3), dtype=dtype, device=self.device)
         if self.num_nodes == 0 or N == 0:
             return Hits(face, t, bary)
-        boxes, tris = self.boxes.to(dtype), self.tris.to(dtype)
+        tris = self.tris.to(dtype)
+        verts = [tris[:, i].contiguous() for i in range(3)]                 # (F, 3) each: quick row gathers
         for s in range(0, N, chunk):
             sl = slice(s, min(s + chunk, N))
-            f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], boxes, tris, any_hit)   # face hit
+            f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], verts, any_hit, int(packet))   # face hit
             ok = (f >= 0).nonzero().squeeze(1)
             if ok.numel():                                                 # the winners' t and bary, once more
                 r = ok + s
@@ -339,53 +361,162 @@ class BVH:
                 face[r], t[r], bary[r] = f[ok], tw, bw
         return Hits(face, t, bary)
 
-    def _traverse(self, o, d, t_lo, t_hi, boxes, tris, any_hit):
-        """The frontier loop for one chunk of rays. Returns the face hit per ray (-1 on a miss).
+    def _traverse(self, o, d, t_lo, t_hi, tris, any_hit, packet):
+        """Trace one chunk of rays. Returns the face hit per ray (-1 on a miss).
 
-        The frontier holds (ray, node) pairs whose box the ray's segment meets. Each step tests the leaves
-        among them and replaces each internal node by those of its two children that the ray still meets.
+        1. Beams: consecutive rays go down the tree together in packets of ``packet`` (``_packets``); the
+           frontier of (packet, node) pairs keeps a node when the packet's beam may meet its box
+           (``_beam_box``), and collects the leaves it reaches.
+        2. Each (packet, leaf) pair becomes a (ray, leaf) pair per ray of the packet, kept when that ray's
+           segment meets the leaf's box; the box's entry distance is kept too.
+        3. Rounds, nearest leaf first: every ray tests the triangles of its nearest remaining leaf (the
+           watertight test) and keeps its closest hit; a leaf whose box starts beyond the closest hit so far
+           can hold no closer hit and is dropped. Most rays finish after a round or two.
         """
         n, dev = o.shape[0], o.device
-        inv = 1 / d                                                         # ±inf where a component is 0
+        # box tests in float64 whatever the rays' dtype: the boxes' planes centre ± half are then exact
+        ob, db = o.double(), d.double()
+        inv = 1 / db                                                        # ±inf where a component is 0
+        start, size, beam = _packets(ob, db, inv, t_lo.double(), t_hi.double(), packet, self._diag)
+        single = bool((size == 1).all())
+        centre, half = self._centre, self._half
+        # 1. the (packet, node) frontier, down to the leaves
+        pk = torch.arange(start.numel(), device=dev)
+        node = torch.zeros_like(pk)
+        leaf_pk, leaf_node = [], []
+        while pk.numel():
+            keep = _beam_box([b.index_select(0, pk) for b in beam], centre.index_select(0, node),
+                             half.index_select(0, node), single)[0].nonzero().squeeze(1)
+            pk, node = pk.index_select(0, keep), node.index_select(0, keep)
+            is_leaf = self.count.index_select(0, node) > 0
+            leaf_pk.append(pk[is_leaf]), leaf_node.append(node[is_leaf])
+            pk, c = pk[~is_leaf], self.left.index_select(0, node[~is_leaf])
+            pk = pk.repeat_interleave(2)                                    # both children of each internal node
+            node = torch.stack([c, c + 1], 1).reshape(-1)
+        pk, node = torch.cat(leaf_pk), torch.cat(leaf_node)
+        # 2. (ray, leaf) pairs, with the entry distance into the leaf's box
+        k = size.index_select(0, pk)
+        ray = torch.repeat_interleave(start.index_select(0, pk), k) + _ranks(k)
+        leaf = torch.repeat_interleave(node, k)
+        if single:                                                          # the packet test was this test
+            hit, entry = _beam_box([b.index_select(0, pk) for b in beam], centre.index_select(0, leaf),
+                                   half.index_select(0, leaf), True)
+        else:
+            rays = _beam(ob, ob, inv, inv, t_lo.double(), t_hi.double())
+            hit, entry = _beam_box([b.index_select(0, ray) for b in rays], centre.index_select(0, leaf),
+                                   half.index_select(0, leaf), True)
+        keep = hit.nonzero().squeeze(1)
+        ray, leaf, entry = ray.index_select(0, keep), leaf.index_select(0, keep), entry.index_select(0, keep)
+        # 3. rounds, nearest leaf first
         best = t_hi.clone()                                                 # the closest hit so far
         none = torch.iinfo(torch.int64).max
         best_face = torch.full((n,), none, dtype=torch.int64, device=dev)   # its face id (none: no hit yet)
-        siblings = boxes[1:].view(-1, 2, 2, 3)                              # children 2k+1, 2k+2 side by side
-        ray = torch.arange(n, device=dev)
-        keep = _slab(o, inv, boxes[:1].expand(n, 2, 3), t_lo, best)         # the root
-        ray = ray[keep]
-        node = torch.zeros_like(ray)
-        L, k = self.leaf_size, torch.arange(self.leaf_size, device=dev)
         while ray.numel():
-            cnt = self.count[node]
-            is_leaf = cnt > 0
-            # leaves: every (ray, triangle) candidate through the watertight test
-            lr, ln = ray[is_leaf], node[is_leaf]
-            if lr.numel():
-                valid = k < cnt[is_leaf][:, None]                           # (P, L)
-                cr = lr[:, None].expand(-1, L)[valid]                       # (Q,) rays
-                cs = (self.first[ln][:, None] + k)[valid]                   # (Q,) slots
-                tri = tris[cs]
-                tc, _, hit = _watertight(o[cr], d[cr], tri[:, 0], tri[:, 1], tri[:, 2])
-                hit &= (tc >= t_lo[cr]) & (tc <= best[cr])
-                cr, cf, tc = cr[hit], self.order[cs[hit]], tc[hit]
-                if cr.numel():
-                    new = best.scatter_reduce(0, cr, tc, reduce="amin")     # per-ray closest t
-                    win = tc == new[cr]
-                    # ties go to the lower face id; a ray whose t improved forgets its old face
-                    face = torch.where(new < best, torch.full_like(best_face, none), best_face)
-                    best_face = face.scatter_reduce_(0, cr[win], cf[win], reduce="amin")
-                    best = new
-            # internal nodes: both children at once, kept when the ray's segment meets their box
-            ir, inode = ray[~is_leaf], node[~is_leaf]
-            if any_hit:                                                     # finished rays drop their pairs
-                alive = best_face[ir] == none
-                ir, inode = ir[alive], inode[alive]
-            c = self.left[inode]                                            # (P,) odd: 2k + 1
-            keep = _slab(o[ir, None], inv[ir, None], siblings[(c - 1) // 2], t_lo[ir, None], best[ir, None])
-            ray = ir[:, None].expand(-1, 2)[keep]                           # (P, 2) → kept pairs
-            node = (c[:, None] + torch.arange(2, device=dev))[keep]
+            nearest = torch.full((n,), math.inf, dtype=entry.dtype, device=dev).scatter_reduce_(0, ray, entry, "amin")
+            pick = entry <= nearest.index_select(0, ray)                    # (ties: all of them)
+            r, lf = ray[pick], leaf[pick]
+            k = self.count.index_select(0, lf)
+            cr = torch.repeat_interleave(r, k)                              # (Q,) rays
+            cs = torch.repeat_interleave(self.first.index_select(0, lf), k) + _ranks(k)   # (Q,) slots
+            tc, _, ok = _watertight(o.index_select(0, cr), d.index_select(0, cr), tris[0].index_select(0, cs),
+                                    tris[1].index_select(0, cs), tris[2].index_select(0, cs))
+            ok &= (tc >= t_lo.index_select(0, cr)) & (tc <= best.index_select(0, cr))
+            cr, cf, tc = cr[ok], self.order.index_select(0, cs[ok]), tc[ok]
+            if cr.numel():
+                new = best.scatter_reduce(0, cr, tc, reduce="amin")         # per-ray closest t
+                win = tc == new.index_select(0, cr)
+                # ties go to the lower face id; a ray whose t improved forgets its old face
+                face = torch.where(new < best, torch.full_like(best_face, none), best_face)
+                best_face = face.scatter_reduce_(0, cr[win], cf[win], reduce="amin")
+                best = new
+            rest = ~pick
+            ray, leaf, entry = ray[rest], leaf[rest], entry[rest]
+            alive = entry <= best.index_select(0, ray)                      # a box beyond the hit: nothing closer
+            if any_hit:
+                alive &= best_face.index_select(0, ray) == none             # finished rays drop their leaves
+            ray, leaf, entry = ray[alive], leaf[alive], entry[alive]
         return torch.where(best_face == none, torch.full_like(best_face, -1), best_face)
+
+
+def _beam(omin, omax, ilo, ihi, t_lo, t_hi):
+    """The per-packet data ``_beam_box`` needs, (G, 3) each unless said: origin box omin, omax; inverse
+    direction interval ilo, ihi (set to 0 on axes that bound nothing); the sign s of the inverses (0 there);
+    caps for the entry and exit (+inf / -inf on bounding axes, -inf / +inf on the others); t_lo, t_hi (G,).
+    An axis bounds nothing unless all inverses have one strict sign and are finite (rays of both signs, or
+    a zero direction component)."""
+    bounded = (ilo * ihi > 0) & torch.isfinite(ilo) & torch.isfinite(ihi)
+    zero = torch.zeros_like(ilo)
+    inf = torch.full_like(ilo, math.inf)
+    ilo, ihi = torch.where(bounded, ilo, zero), torch.where(bounded, ihi, zero)
+    return [omin, omax, ilo, ihi, torch.sign(ilo), torch.where(bounded, inf, -inf),
+            torch.where(bounded, -inf, inf), t_lo, t_hi]
+
+
+def _packets(o, d, inv, t_lo, t_hi, size, diag):
+    """Group N rays into packets of up to ``size`` consecutive rays; a group whose rays are not coherent (unit
+    directions more than ``PACKET_SPREAD`` apart in some component, or origins more than ``PACKET_SPREAD``
+    times the scene's diagonal apart) is split into packets of one ray.
+
+    Returns start (G,), size (G,) (the packet's rays are start, ..., start + size - 1) and the beams
+    (``_beam``): the packet's origin box, its interval of inverse directions and its widest segment.
+    """
+    n, dev = o.shape[0], o.device
+    g = torch.arange(n, device=dev) // size                                # group of each ray
+    G = (n + size - 1) // size
+
+    def reduce(x, how):
+        fill = math.inf if how == "amin" else -math.inf
+        out = torch.full((G,) + x.shape[1:], fill, dtype=x.dtype, device=dev)
+        idx = g.view(-1, *([1] * (x.dim() - 1))).expand_as(x)
+        return out.scatter_reduce_(0, idx, x, reduce=how)
+
+    u = d / d.norm(dim=1, keepdim=True).clamp_min(torch.finfo(d.dtype).tiny)
+    omin, omax = reduce(o, "amin"), reduce(o, "amax")
+    coherent = (((reduce(u, "amax") - reduce(u, "amin")).amax(1) <= PACKET_SPREAD)
+                & ((omax - omin).amax(1) <= PACKET_SPREAD * diag))
+    start = torch.arange(G, device=dev) * size
+    count = (n - start).clamp(max=size)
+    single = (~coherent).index_select(0, g).nonzero().squeeze(1)            # rays of incoherent groups
+    keep = coherent.nonzero().squeeze(1)
+    start = torch.cat([start.index_select(0, keep), single])
+    count = torch.cat([count.index_select(0, keep), torch.ones_like(single)])
+    # the beams of the final packets
+    g = torch.repeat_interleave(torch.arange(start.numel(), device=dev), count)   # packet of each ray
+    G = start.numel()
+    rays = torch.repeat_interleave(start, count) + _ranks(count)
+    o, inv, t_lo, t_hi = o[rays], inv[rays], t_lo[rays], t_hi[rays]
+    return start, count, _beam(reduce(o, "amin"), reduce(o, "amax"), reduce(inv, "amin"), reduce(inv, "amax"),
+                               reduce(t_lo, "amin"), reduce(t_hi, "amax"))
+
+
+def _beam_box(beam, centre, half, single: bool = False):
+    """Can some ray of a packet meet a box? beam: the packets' ``_beam`` data, one row per pair; centre, half
+    (P, 3): the boxes' centres and half extents. single: every packet is one ray (omin = omax, ilo = ihi).
+    Returns hit (P,) bool and the entry distance (P,).
+
+    Along an axis where every ray's inverse direction lies in [ilo, ihi] (one sign s), a ray enters the slab
+    at (near - o) / d and leaves at (far - o) / d, near = centre - s half and far = centre + s half the planes
+    in the order the rays cross them. Over origins in [omin, omax] and inverses in [ilo, ihi] both are
+    bilinear, so the smallest entry and the largest exit lie at corners of the two intervals: the packet
+    misses the box when the largest of the smallest entries exceeds the smallest of the largest exits (or its
+    segment [t_lo, t_hi]). That never drops a box one of the rays meets; for one ray it is the slab test.
+    An axis that bounds nothing gives entry -inf and exit +inf (the caps). The exit is widened by a few ulps,
+    as in ``_slab``.
+    """
+    omin, omax, ilo, ihi, s, cap_e, cap_x, t_lo, t_hi = beam
+    sh = s * half
+    near, far = centre - sh, centre + sh
+    if single:
+        e, x = (near - omin) * ilo, (far - omin) * ilo
+    else:
+        a, b = near - omax, near - omin
+        e = torch.minimum(torch.minimum(a * ilo, a * ihi), torch.minimum(b * ilo, b * ihi))
+        a, b = far - omax, far - omin
+        x = torch.maximum(torch.maximum(a * ilo, a * ihi), torch.maximum(b * ilo, b * ihi))
+    e, x = torch.minimum(e, cap_e).amax(1), torch.maximum(x, cap_x).amin(1)
+    entry = torch.maximum(e, t_lo)
+    exit_ = torch.minimum(x + x.abs() * (4 * torch.finfo(x.dtype).eps), t_hi)
+    return entry <= exit_, entry
 
 
 def _ranks(counts):
@@ -473,6 +604,15 @@ def _camera_rays(camera):
     return eye.expand(H * W, 3), cam @ R, cam[:, 2]
 
 
+def _tile_order(H, W, device, tile: int = 4):
+    """Row-major pixel indices (H*W,) reordered tile by tile (``tile`` x ``tile`` tiles, row-major inside):
+    16 consecutive rays then form one tile, a coherent packet for ``BVH.intersect``."""
+    p = torch.arange(H * W, device=device)
+    i, j = p // W, p % W
+    key = ((i // tile) * ((W + tile - 1) // tile) + j // tile) * tile * tile + (i % tile) * tile + j % tile
+    return torch.argsort(key)
+
+
 def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     """Ray-cast a triangle mesh: the same ``Fragments`` as ``rasterize``, found by tracing rays.
 
@@ -491,9 +631,12 @@ def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     elif not isinstance(bvh, BVH) or bvh.order.numel() != faces.shape[0]:
         raise ValueError("bvh must be a BVH built from this mesh")
     o, d, dz = _camera_rays(camera)
+    tiles = _tile_order(H, W, o.device)                                     # 4 x 4 tiles: coherent packets
+    o, d, dz = o.index_select(0, tiles), d.index_select(0, tiles), dz.index_select(0, tiles)
     with torch.no_grad():                                                   # which face: not differentiable
-        face = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(camera.near / dz).to(bvh.device),
-                             t_max=(camera.far / dz).to(bvh.device)).face_id.to(verts.device)
+        hit = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(camera.near / dz).to(bvh.device),
+                            t_max=(camera.far / dz).to(bvh.device)).face_id.to(verts.device)
+    face = torch.empty_like(hit).index_put_((tiles.to(verts.device),), hit)  # back to row-major pixels
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     pix = (face >= 0).nonzero().squeeze(1)
     x, y = (pix % W).double() + 0.5, (pix // W).double() + 0.5

@@ -160,6 +160,68 @@ def test_bvh_matches_brute_force(name):
     assert not short.hit[m].any()
 
 
+def coherent_rays(n_packets, seed, dtype=torch.float64):
+    """Packets of 16 rays, each a narrow fan (shared or nearby origins, directions 0.02 apart), some aimed
+    exactly along an axis (zero components, mixed signs inside the packet) and some from one origin."""
+    g = torch.Generator().manual_seed(seed)
+    base_o = 2.0 * torch.randn(n_packets, 1, 3, generator=g, dtype=dtype)
+    base_d = -base_o + 0.3 * torch.randn(n_packets, 1, 3, generator=g, dtype=dtype)   # towards the mesh
+    base_d = base_d / base_d.norm(dim=2, keepdim=True)
+    o = base_o + 1e-3 * torch.randn(n_packets, 16, 3, generator=g, dtype=dtype)
+    o[::3] = base_o[::3]                                                    # one origin, a pinhole's fan
+    d = base_d + 0.02 * (torch.rand(n_packets, 16, 3, generator=g, dtype=dtype) - 0.5)
+    d[::5, :, 1:] = 0.0                                                     # along x: y and z components 0
+    d[::5, :, 0] = torch.where(base_d[::5, :, 0] < 0, -1.0, 1.0)
+    d[1::5, :8, 2] = 0.0                                                    # zero and both signs in one packet
+    d[1::5, 8:, 2] = torch.linspace(-0.01, 0.01, 8, dtype=dtype)
+    return o.reshape(-1, 3), d.reshape(-1, 3)
+
+
+@pytest.mark.parametrize("any_hit", [False, True])
+def test_packets_find_the_same_hits_as_single_rays_and_brute_force(any_hit):
+    """Coherent rays go down the tree 16 at a time; the hits must not depend on it."""
+    mesh = teapot(4, dtype=torch.float64)
+    bvh = BVH(mesh)
+    o, d = coherent_rays(60, seed=5)
+    _, face, t = brute_force(intersect_triangles, o, d, mesh.verts[mesh.faces])
+    assert (face >= 0).sum() > 200 and (face < 0).sum() > 50
+    packed = bvh.intersect(o, d, any_hit=any_hit)
+    alone = bvh.intersect(o, d, any_hit=any_hit, packet=1)
+    assert torch.equal(packed.hit, face >= 0) and torch.equal(alone.hit, face >= 0)
+    if not any_hit:
+        assert torch.equal(packed.face_id, face) and torch.equal(alone.face_id, face)
+        assert torch.equal(packed.t, alone.t)
+    with pytest.raises(ValueError, match="packet"):
+        bvh.intersect(o, d, packet=0)
+
+
+def test_beam_box_never_drops_a_box_one_of_its_rays_meets():
+    """The interval slab test of a packet against many boxes: wherever one ray of the packet meets a box
+    (the per-ray slab test), the packet's test must say "maybe"; and for one ray it is that slab test."""
+    from course.raytrace import _beam, _beam_box, _slab
+    g = torch.Generator().manual_seed(6)
+    P, K = 3000, 16
+    lo = torch.randn(P, 1, 3, generator=g, dtype=torch.float64)
+    hi = lo + torch.rand(P, 1, 3, generator=g, dtype=torch.float64)
+    o = 3 * torch.randn(P, 1, 3, generator=g, dtype=torch.float64) + 0.05 * torch.randn(P, K, 3, generator=g,
+                                                                                          dtype=torch.float64)
+    aim = (lo + hi) / 2 - o[:, :1] + 0.7 * torch.randn(P, 1, 3, generator=g, dtype=torch.float64)
+    d = aim + 0.05 * torch.randn(P, K, 3, generator=g, dtype=torch.float64)  # about half the packets hit
+    d[::7, :, 0] = 0.0
+    inv = 1 / d
+    t_lo, t_hi = torch.zeros(P, K, dtype=torch.float64), torch.full((P, K), math.inf, dtype=torch.float64)
+    per_ray = _slab(o, inv, torch.stack([lo, hi], 2).expand(P, K, 2, 3), t_lo, t_hi)    # (P, K)
+    beam = _beam(o.amin(1), o.amax(1), inv.amin(1), inv.amax(1), t_lo.amin(1), t_hi.amax(1))
+    hit, _ = _beam_box(beam, ((lo + hi) / 2)[:, 0], ((hi - lo) / 2)[:, 0])
+    assert per_ray.any(1).sum() > 300 and (~per_ray.any(1)).sum() > 300
+    assert hit[per_ray.any(1)].all()
+    assert hit.float().mean() < 0.9                                         # and it does cull
+    one = _beam(o[:, 0], o[:, 0], inv[:, 0], inv[:, 0], t_lo[:, 0], t_hi[:, 0])
+    single, _ = _beam_box(one, ((lo + hi) / 2)[:, 0], ((hi - lo) / 2)[:, 0], True)
+    ok = (d[:, 0] != 0).all(1)                                              # (zero components: kept, see _beam)
+    assert torch.equal(single[ok], per_ray[ok, 0]) and single[per_ray[:, 0]].all()
+
+
 def test_bvh_ties_go_to_the_lower_face_id():
     """Two copies of the same triangle (ids 1 and 3 among others): every ray reports face 1."""
     v = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5]], dtype=torch.float64)
