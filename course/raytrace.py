@@ -361,6 +361,54 @@ class BVH:
                 face[r], t[r], bary[r] = f[ok], tw, bw
         return Hits(face, t, bary)
 
+    def _one_by_one(self, o, d, t_lo, t_hi, boxes, tris, any_hit):
+        """Incoherent rays, one by one: a frontier of (ray, node) pairs whose box the ray's segment meets,
+        [t_min, closest hit so far]. Each step tests the leaves among them and replaces each internal node by
+        those of its two children that the ray still meets, so a hit found high in the tree prunes the rest.
+        Returns the face hit per ray (-1 on a miss)."""
+        n, dev = o.shape[0], o.device
+        inv = 1 / d                                                         # ±inf where a component is 0
+        best = t_hi.clone()                                                 # the closest hit so far
+        none = torch.iinfo(torch.int64).max
+        best_face = torch.full((n,), none, dtype=torch.int64, device=dev)   # its face id (none: no hit yet)
+        siblings = boxes[1:].view(-1, 2, 2, 3)                              # children 2k+1, 2k+2 side by side
+        ray = torch.arange(n, device=dev)
+        keep = _slab(o, inv, boxes[:1].expand(n, 2, 3), t_lo, best)         # the root
+        ray = ray[keep]
+        node = torch.zeros_like(ray)
+        L, k = self.leaf_size, torch.arange(self.leaf_size, device=dev)
+        while ray.numel():
+            cnt = self.count[node]
+            is_leaf = cnt > 0
+            # leaves: every (ray, triangle) candidate through the watertight test
+            lr, ln = ray[is_leaf], node[is_leaf]
+            if lr.numel():
+                valid = k < cnt[is_leaf][:, None]                           # (P, L)
+                cr = lr[:, None].expand(-1, L)[valid]                       # (Q,) rays
+                cs = (self.first[ln][:, None] + k)[valid]                   # (Q,) slots
+                tri = tris[cs]
+                tc, _, hit = _watertight(o[cr], d[cr], tri[:, 0], tri[:, 1], tri[:, 2])
+                hit &= (tc >= t_lo[cr]) & (tc <= best[cr])
+                cr, cf, tc = cr[hit], self.order[cs[hit]], tc[hit]
+                if cr.numel():
+                    new = best.scatter_reduce(0, cr, tc, reduce="amin")     # per-ray closest t
+                    win = tc == new[cr]
+                    # ties go to the lower face id; a ray whose t improved forgets its old face
+                    face = torch.where(new < best, torch.full_like(best_face, none), best_face)
+                    best_face = face.scatter_reduce_(0, cr[win], cf[win], reduce="amin")
+                    best = new
+            # internal nodes: both children at once, kept when the ray's segment meets their box
+            ir, inode = ray[~is_leaf], node[~is_leaf]
+            if any_hit:                                                     # finished rays drop their pairs
+                alive = best_face[ir] == none
+                ir, inode = ir[alive], inode[alive]
+            c = self.left[inode]                                            # (P,) odd: 2k + 1
+            keep = _slab(o[ir, None], inv[ir, None], siblings[(c - 1) // 2], t_lo[ir, None], best[ir, None])
+            ray = ir[:, None].expand(-1, 2)[keep]                           # (P, 2) → kept pairs
+            node = (c[:, None] + torch.arange(2, device=dev))[keep]
+        return torch.where(best_face == none, torch.full_like(best_face, -1), best_face)
+
+
     def _traverse(self, o, d, t_lo, t_hi, tris, any_hit, packet):
         """Trace one chunk of rays. Returns the face hit per ray (-1 on a miss).
 
@@ -377,34 +425,52 @@ class BVH:
         # box tests in float64 whatever the rays' dtype: the boxes' planes centre ± half are then exact
         ob, db = o.double(), d.double()
         inv = 1 / db                                                        # ±inf where a component is 0
-        start, size, beam = _packets(ob, db, inv, t_lo.double(), t_hi.double(), packet, self._diag)
-        single = bool((size == 1).all())
+        start, size, beam, width = _packets(ob, db, inv, t_lo.double(), t_hi.double(), packet, self._diag)
+        alone = start[size == 1]                                            # incoherent rays: one by one
+        coherent = (size > 1).nonzero().squeeze(1)
+        start, size = start.index_select(0, coherent), size.index_select(0, coherent)
+        beam = [b.index_select(0, coherent) for b in beam]
+        width = [w.index_select(0, coherent) for w in width]
+        G = start.numel()
+        # every ray is also a packet of its own, G + r: a packet splits into them at a node smaller than its beam
+        rays = _beam(ob, ob, inv, inv, t_lo.double(), t_hi.double())
+        beam = [torch.cat([b, r]) for b, r in zip(beam, rays)]
+        start = torch.cat([start, torch.arange(n, device=dev)])
+        size = torch.cat([size, torch.ones(n, dtype=size.dtype, device=dev)])
+        spread_o = torch.cat([width[0], torch.zeros(n, dtype=width[0].dtype, device=dev)])
+        spread_d = torch.cat([width[1], torch.zeros(n, dtype=width[1].dtype, device=dev)])
         centre, half = self._centre, self._half
         # 1. the (packet, node) frontier, down to the leaves
-        pk = torch.arange(start.numel(), device=dev)
+        pk = torch.arange(G, device=dev)
         node = torch.zeros_like(pk)
-        leaf_pk, leaf_node = [], []
+        leaf_pk, leaf_node = [pk[:0]], [node[:0]]
         while pk.numel():
-            keep = _beam_box([b.index_select(0, pk) for b in beam], centre.index_select(0, node),
-                             half.index_select(0, node), single)[0].nonzero().squeeze(1)
-            pk, node = pk.index_select(0, keep), node.index_select(0, keep)
+            hit, entry = _beam_box([b.index_select(0, pk) for b in beam], centre.index_select(0, node),
+                                   half.index_select(0, node))
+            keep = hit.nonzero().squeeze(1)
+            pk, node, entry = pk.index_select(0, keep), node.index_select(0, keep), entry.index_select(0, keep)
+            # a node narrower than the packet's beam where the beam reaches it: its rays go on one by one
+            beam_width = spread_o.index_select(0, pk) + entry.clamp_min(0) * spread_d.index_select(0, pk)
+            split = (pk < G) & (2 * half.index_select(0, node).amax(1) < beam_width)
+            if split.any():
+                sp, sn = pk[split], node[split]
+                k = size.index_select(0, sp)
+                ray_pk = G + torch.repeat_interleave(start.index_select(0, sp), k) + _ranks(k)
+                pk, node = pk[~split], node[~split]
             is_leaf = self.count.index_select(0, node) > 0
             leaf_pk.append(pk[is_leaf]), leaf_node.append(node[is_leaf])
             pk, c = pk[~is_leaf], self.left.index_select(0, node[~is_leaf])
             pk = pk.repeat_interleave(2)                                    # both children of each internal node
             node = torch.stack([c, c + 1], 1).reshape(-1)
+            if split.any():                                                 # each ray tests the node itself next
+                pk, node = torch.cat([pk, ray_pk]), torch.cat([node, torch.repeat_interleave(sn, k)])
         pk, node = torch.cat(leaf_pk), torch.cat(leaf_node)
         # 2. (ray, leaf) pairs, with the entry distance into the leaf's box
         k = size.index_select(0, pk)
         ray = torch.repeat_interleave(start.index_select(0, pk), k) + _ranks(k)
         leaf = torch.repeat_interleave(node, k)
-        if single:                                                          # the packet test was this test
-            hit, entry = _beam_box([b.index_select(0, pk) for b in beam], centre.index_select(0, leaf),
-                                   half.index_select(0, leaf), True)
-        else:
-            rays = _beam(ob, ob, inv, inv, t_lo.double(), t_hi.double())
-            hit, entry = _beam_box([b.index_select(0, ray) for b in rays], centre.index_select(0, leaf),
-                                   half.index_select(0, leaf), True)
+        hit, entry = _beam_box([b.index_select(0, ray) for b in rays], centre.index_select(0, leaf),
+                               half.index_select(0, leaf), True)
         keep = hit.nonzero().squeeze(1)
         ray, leaf, entry = ray.index_select(0, keep), leaf.index_select(0, keep), entry.index_select(0, keep)
         # 3. rounds, nearest leaf first
@@ -435,7 +501,11 @@ class BVH:
             if any_hit:
                 alive &= best_face.index_select(0, ray) == none             # finished rays drop their leaves
             ray, leaf, entry = ray[alive], leaf[alive], entry[alive]
-        return torch.where(best_face == none, torch.full_like(best_face, -1), best_face)
+        face = torch.where(best_face == none, torch.full_like(best_face, -1), best_face)
+        if alone.numel():
+            face[alone] = self._one_by_one(o[alone], d[alone], t_lo[alone], t_hi[alone],
+                                           self.boxes.to(o.dtype), torch.stack(tris, 1), any_hit)
+        return face
 
 
 def _beam(omin, omax, ilo, ihi, t_lo, t_hi):
@@ -457,8 +527,10 @@ def _packets(o, d, inv, t_lo, t_hi, size, diag):
     directions more than ``PACKET_SPREAD`` apart in some component, or origins more than ``PACKET_SPREAD``
     times the scene's diagonal apart) is split into packets of one ray.
 
-    Returns start (G,), size (G,) (the packet's rays are start, ..., start + size - 1) and the beams
-    (``_beam``): the packet's origin box, its interval of inverse directions and its widest segment.
+    Returns start (G,), size (G,) (the packet's rays are start, ..., start + size - 1), the beams
+    (``_beam``: the packet's origin box, its interval of inverse directions and its widest segment) and the
+    beam's width (G,) at t = 0 and its growth per unit t (G,): the largest spread of the origins and of the
+    directions over the three axes.
     """
     n, dev = o.shape[0], o.device
     g = torch.arange(n, device=dev) // size                                # group of each ray
@@ -485,8 +557,10 @@ def _packets(o, d, inv, t_lo, t_hi, size, diag):
     G = start.numel()
     rays = torch.repeat_interleave(start, count) + _ranks(count)
     o, inv, t_lo, t_hi = o[rays], inv[rays], t_lo[rays], t_hi[rays]
-    return start, count, _beam(reduce(o, "amin"), reduce(o, "amax"), reduce(inv, "amin"), reduce(inv, "amax"),
-                               reduce(t_lo, "amin"), reduce(t_hi, "amax"))
+    omin, omax = reduce(o, "amin"), reduce(o, "amax")
+    width = ((omax - omin).amax(1), (reduce(d[rays], "amax") - reduce(d[rays], "amin")).amax(1))
+    return start, count, _beam(omin, omax, reduce(inv, "amin"), reduce(inv, "amax"), reduce(t_lo, "amin"),
+                               reduce(t_hi, "amax")), width
 
 
 def _beam_box(beam, centre, half, single: bool = False):
