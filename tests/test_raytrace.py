@@ -198,7 +198,8 @@ def test_packets_find_the_same_hits_as_single_rays_and_brute_force(any_hit):
 def test_beam_box_never_drops_a_box_one_of_its_rays_meets():
     """The interval slab test of a packet against many boxes: wherever one ray of the packet meets a box
     (the per-ray slab test), the packet's test must say "maybe"; and for one ray it is that slab test."""
-    from course.raytrace import _beam, _beam_box, _slab
+    from course.bvh import _beam, _beam_box
+    from course.intersect import _slab
     g = torch.Generator().manual_seed(6)
     P, K = 3000, 16
     lo = torch.randn(P, 1, 3, generator=g, dtype=torch.float64)

@@ -119,10 +119,10 @@ def _parallel_rays(dtype=torch.float64):
     return f(o), f(d), f([tri] * len(o))
 
 
-@task("7.1", "ray_triangle", points=3, reference=("course.raytrace", "intersect_triangles"))
+@task("7.1", "ray_triangle", points=3, reference=("course.intersect", "intersect_triangles"))
 def _check_ray_triangle(impl):
-    forbidden = forbidden_call(impl, "ray_triangle", [("course.raytrace", "moller_trumbore"),
-                                                  ("course.raytrace", "BVH")])
+    forbidden = forbidden_call(impl, "ray_triangle", [("course.intersect", "moller_trumbore"),
+                                                  ("course.bvh", "BVH")])
     if forbidden:
         return 0, forbidden
 
@@ -230,9 +230,9 @@ def _axis_rays(dtype=torch.float64):
     return f(o), f(d), f([[0.0, 0.0, 0.0]] * n), f([[1.0, 1.0, 1.0]] * n)
 
 
-@task("7.2", "ray_aabb", points=3, reference=("course.raytrace", "ray_box"))
+@task("7.2", "ray_aabb", points=3, reference=("course.intersect", "ray_box"))
 def _check_ray_aabb(impl):
-    forbidden = forbidden_call(impl, "ray_aabb", [("course.raytrace", "_slab"), ("course.raytrace", "BVH")])
+    forbidden = forbidden_call(impl, "ray_aabb", [("course.intersect", "_slab"), ("course.bvh", "BVH")])
     if forbidden:
         return 0, forbidden
 
@@ -313,8 +313,8 @@ def _shadow_scene(dtype=torch.float64):
 
 @task("7.3", "shadow_ray", points=3, reference=("course.raytrace", "visible"))
 def _check_shadow_ray(impl):
-    forbidden = forbidden_call(impl, "shadow_ray", [("course.raytrace", "BVH"),
-                                                ("course.raytrace", "moller_trumbore")])
+    forbidden = forbidden_call(impl, "shadow_ray", [("course.bvh", "BVH"),
+                                                ("course.intersect", "moller_trumbore")])
     if forbidden:
         return 0, forbidden
     tris = _shadow_scene()
