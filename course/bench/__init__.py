@@ -14,6 +14,8 @@
   speed-up over brute force, optionally side by side with Embree.
 * ``shadows`` (``course.bench.shadows``): shadow maps (resolution, PCF) and area-light shadow maps against
   ray-traced shadows: time against error, a table and a Pareto plot.
+* ``soft`` (``course.bench.soft``): the hard rasterizer, NMR's approximate gradient and soft rasterization
+  (σ, γ, threshold) on S4: forward and forward+backward time, image error to the exact box-filtered image.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -29,7 +31,7 @@ import json
 
 import torch
 
-from . import aa, precision, raster, raytrace, shadows, skips
+from . import aa, precision, raster, raytrace, shadows, skips, soft
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -38,7 +40,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
-           "raytrace": raytrace, "shadows": shadows}
+           "raytrace": raytrace, "shadows": shadows, "soft": soft}
 
 
 def cli(argv) -> int:

@@ -1,0 +1,540 @@
+"""Differentiable rasterization: the Neural 3D Mesh Renderer's approximate gradient and soft rasterization
+(lecture 08).
+
+A rasterized pixel is a step function of every vertex position: as a vertex moves, the pixel's colour
+jumps when an edge crosses the pixel centre and is constant in between, so its derivative is zero almost
+everywhere. Two classic cures, both built here from the hard rasterizer's pieces (``course.raster``):
+
+**The Neural 3D Mesh Renderer** (Kato, Ushiku and Harada, "Neural 3D Mesh Renderer", CVPR 2018),
+``nmr_rasterize`` and ``nmr_image``. The forward pass is the hard rasterizer, unchanged. The backward pass
+replaces the step by a secant: for pixel P and the screen coordinate x of a vertex, find the displacement
+δx of the vertex at which an edge of its face would cross P's centre, and the colour change δI the pixel
+would see there; use ``∂I/∂x ≈ δI / δx``. The paper's sign rule keeps only useful secants: with δᴾ = ∂L/∂I
+the incoming gradient, the term is dropped where ``δᴾ · δI ≥ 0`` (moving the vertex that way would not
+lower the loss). A pixel outside the face can be covered by moving an edge toward it (the paper's fig. 2);
+a pixel inside can be uncovered by moving either of the two edges that bound its row, and both terms are
+summed (fig. 3). Rows give the gradient of x, columns that of y. Because of the sign rule the backward is
+*not linear* in the incoming gradient: ``backward(2 g) = 2 backward(g)`` holds, ``backward(g + h)`` does
+not equal ``backward(g) + backward(h)``. Two choices of ours, both options: δx is floored at
+``min_step`` pixels (0.5 by default: the secant has a pole where an edge already passes through the centre),
+and only pixels within ``reach`` pixels of an edge along the row or column are visited (None: the whole
+row, as in the paper).
+
+**Soft rasterization** (Liu, Li, Chen and Li, "Soft Rasterizer", ICCV 2019), ``soft_rasterize``. Every face
+covers every pixel a little: ``D = sigmoid(δ d² / σ)``, with d the distance from the pixel centre to the
+projected triangle and δ = +1 inside, -1 outside. As in the paper, d is measured in normalised device
+coordinates, where the image is 2 wide: ``d_ndc = 2 d_px / W``, so ``d_ndc² / σ = d_px² / σ_px`` with
+``σ_px = σ W² / 4`` (σ = 1e-4 on a 256-pixel image is σ_px = 1.64 px²). A silhouette aggregates the faces
+with a probabilistic OR, ``1 - Π_j (1 - D_j)``; a colour image with a softmax over depth,
+
+    I = (Σ_j w_j C_j + w_b C_b) / (Σ_j w_j + w_b),   w_j = D_j exp(z_j / γ),   w_b = exp(ε / γ),
+
+where z_j ∈ [0, 1] is the face's normalised inverse depth at the pixel (1 at the near plane, 0 at the far
+one; see ``_nearness``) and the background C_b is one more term at z = ε. Everything is computed in logs
+(``logsigmoid``, the max subtracted before ``exp``), so float32 stays finite for σ down to 1e-7 and γ down to
+1e-5. Only (pixel, face) pairs that can matter are computed: a face's weight relative to the largest term
+at the pixel must reach ``threshold`` (sigmoid *and* softmax factor, so the error stays bounded as γ → 0).
+The candidates come from a screen-space radius around each face (``_candidate_pairs``, row by row as in
+``scan.pixel_triangle_pairs``), and the per-pair work runs on (N,) vectors of pairs, chunked, so no
+faces × pixels tensor is ever formed. Faces crossing the near plane are clipped there, as ``rasterize`` does.
+
+The limits: σ → 0 alone makes each D a step, but a fixed γ still blends overlapping faces; γ → 0 alone
+picks the nearest face among all those with D > 0, and every face has D > 0 everywhere, so a nearer face
+far outside a pixel wins over the background: the silhouette of the colour image fattens by about
+``sqrt(σ (z - ε) / γ)`` (NDC). Along σ = γ² both go to 0 together and the image tends to the hard
+rasterizer's, at pixels farther than a pixel from any edge (``tests/test_soft.py`` measures both).
+
+Both methods produce a gradient with respect to ``mesh.verts``, the colours, and the camera's K, R, t.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch.utils.checkpoint import checkpoint
+
+from .camera import world_to_camera
+from .raster import _camera_space, _check_inputs, _clip_near, _project, rasterize
+from .scan import _expand, _max3, _min3
+from .tensors import as_tensor
+
+__all__ = ["soft_rasterize", "nmr_rasterize", "nmr_image", "NMRGradient"]
+
+CHUNK = 1 << 18      # (pixel, face) pairs computed at once: bounds the memory of the intermediates
+
+
+# -------------------------------------------------------------------------------- shared: screen triangles
+
+def _screen_faces(verts, faces, camera, cull_backfaces, attr=None):
+    """Faces projected to the screen, differentiable in verts, K, R and t.
+
+    Faces behind the camera or beyond the far plane are dropped, back faces too if asked; faces crossing
+    the near plane are clipped there in camera space (``raster._clip_near``), so nothing is divided by a
+    depth <= 0. The decisions are made on detached float64 copies (as ``rasterize`` makes them).
+    attr: optional (V, C) per-vertex values (vertex colours), clipped along with the positions.
+    Returns xy (T, 3, 2) pixels, q (T, 3) = 1/z (perspective) or z (orthographic), face (T,) ids,
+    and attr (T, 3, C) or None.
+    """
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
+    verts_cam = world_to_camera(verts.to(dtype), R, t)                      # (V, 3) differentiable
+    with torch.no_grad():
+        v = _camera_space(verts, camera)[faces]                             # (F, 3, 3) float64
+        z = v[..., 2]
+        keep = (_max3(z) >= camera.near) & (_min3(z) <= camera.far)
+        if cull_backfaces:                                                  # front faces are CCW to the viewer
+            normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+            keep &= (normal[:, 2] < 0) if camera.orthographic else ((normal * v[:, 0]).sum(-1) < 0)
+        whole = (keep & (_min3(z) >= camera.near)).nonzero().squeeze(1)
+        crossing = (keep & (_min3(z) < camera.near)).nonzero().squeeze(1)
+    xy_v, q_v = _project_safe(verts_cam, camera, K)                         # each vertex projected once
+    idx = faces.index_select(0, whole)                                      # (T, 3)
+    xy, q, face = xy_v[idx], q_v[idx], whole
+    a = None if attr is None else attr.to(dtype)[idx]
+    if crossing.numel():
+        # clip the attributes with the positions: _clip_near interpolates every column along the edge
+        full = verts_cam if attr is None else torch.cat([verts_cam, attr.to(dtype)], 1)
+        tri, ids = _clip_near(full, faces, crossing, camera.near)           # (C, 3, 3 + attr)
+        xy_c, q_c = _project(tri[..., :3], camera, K)
+        xy, q, face = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids])
+        a = None if attr is None else torch.cat([a, tri[..., 3:]])
+    return xy, q, face, a
+
+
+def _project_safe(verts_cam, camera, K):
+    """``raster._project`` of every vertex, differentiably, those far behind the near plane (z < near / 2)
+    first replaced by a harmless point: no face uses them, but dividing by their z <= 0 would send
+    0 · inf = NaN into the backward pass. Returns xy (V, 2) and q (V,)."""
+    if not camera.orthographic:
+        ok = verts_cam[:, 2].detach() >= 0.5 * camera.near
+        verts_cam = torch.where(ok[:, None], verts_cam, torch.ones_like(verts_cam))
+    return _project(verts_cam, camera, K)
+
+
+def _nearness(q, camera):
+    """Normalised inverse depth z ∈ [0, 1] from q: 1 at the near plane, 0 at the far plane, larger = nearer.
+    Perspective: ``(1/depth - 1/far) / (1/near - 1/far)``, affine in q = 1/depth and so affine on screen.
+    Orthographic (q = depth): ``(far - depth) / (far - near)``."""
+    n, f = camera.near, camera.far
+    if camera.orthographic:
+        return (f - q) / (f - n)
+    return (q - 1 / f) / (1 / n - 1 / f)
+
+
+# ------------------------------------------------------------------------------------- soft rasterization
+
+def _candidate_pairs(xy, radius, W, H):
+    """Every (pixel, triangle) pair whose pixel centre may lie within ``radius`` pixels of the triangle.
+
+    xy: (T, 3, 2) float64; radius: (T,) pixels. Returns pixel (N,) and tri (N,), grouped by triangle.
+    Row by row (centre y_c), the triangle is cut to the band [y_c - r, y_c + r] (as in
+    ``scan.pixel_triangle_pairs``); the band's x-extent widened by r gives the columns. Conservative: every
+    point within r of the triangle is listed; a few pixels near the corners farther than r are too.
+    """
+    pad = 1e-9 * (1 + xy.abs().amax((1, 2))) + radius                       # (T,) r and rounding
+    y = xy[..., 1]
+    first = torch.ceil(_min3(y) - pad - 0.5).clamp(min=0)
+    last = torch.floor(_max3(y) + pad - 0.5).clamp(max=H - 1)
+    tri_of_seg, seg_start = _expand((last - first + 1).clamp(min=0).long())
+    n = torch.arange(tri_of_seg.numel(), device=xy.device)
+    yc = first[tri_of_seg] + (n - seg_start[tri_of_seg]) + 0.5               # (S,) row centres
+    r = pad[tri_of_seg, None]
+    a = xy[tri_of_seg]                                                      # (S, 3, 2)
+    b = a.roll(-1, 1)                                                       # edges a→b
+    dy = b[..., 1] - a[..., 1]
+    flat = dy == 0
+    dy = torch.where(flat, torch.ones_like(dy), dy)
+    t0, t1 = (yc[:, None] - r - a[..., 1]) / dy, (yc[:, None] + r - a[..., 1]) / dy
+    t_in = torch.where(flat, 0.0, torch.minimum(t0, t1).clamp(min=0))     # the part of the edge in the band
+    t_out = torch.where(flat, 1.0, torch.maximum(t0, t1).clamp(max=1))
+    ok = torch.where(flat, (a[..., 1] - yc[:, None]).abs() <= r, t_in <= t_out)   # (S, 3)
+    dx = b[..., 0] - a[..., 0]
+    x_in, x_out = a[..., 0] + t_in * dx, a[..., 0] + t_out * dx
+    x_lo = torch.where(ok, torch.minimum(x_in, x_out), math.inf).amin(1)   # (S,)
+    x_hi = torch.where(ok, torch.maximum(x_in, x_out), -math.inf).amax(1)
+    meets = torch.isfinite(x_lo)
+    col0 = torch.where(meets, torch.ceil(x_lo - r[:, 0] - 0.5), 0.0).clamp(min=0)
+    col1 = torch.where(meets, torch.floor(x_hi + r[:, 0] - 0.5), -1.0).clamp(max=W - 1)
+    count = (col1 - col0 + 1).clamp(min=0).long()
+    base = ((yc - 0.5) * W + col0.clamp(max=W - 1)).long()
+    seg_of_px, px_start = _expand(count)
+    pixel = base[seg_of_px] + torch.arange(seg_of_px.numel(), device=xy.device) - px_start[seg_of_px]
+    return pixel, tri_of_seg[seg_of_px]
+
+
+def _pair_terms(xy, tri, pixel, W, s, bary: bool = True):
+    """Signed, scaled squared distance and clamped barycentrics of each pair's pixel centre.
+
+    xy: (T, 3, 2) triangles on screen (either winding); tri, pixel: (N,) the pairs; s: 1/σ_px.
+    Returns x (N,) = δ d² / σ_px (δ = +1 inside, -1 outside) and, if asked, bary: three (N,) tensors, the
+    screen-space barycentrics clamped to [0, 1] and renormalised (the paper's choice: outside a face, its
+    attributes are those of the nearest point). Finite for degenerate triangles (zero area: never inside,
+    bary 1/3 each). Written one coordinate at a time on (N,) vectors: several times faster than (N, 3, 2)
+    tensors.
+    """
+    px = (pixel % W).to(xy.dtype) + 0.5                                     # (N,) pixel centre
+    py = (pixel // W).to(xy.dtype) + 0.5
+    X = [xy[:, k, 0].index_select(0, tri) for k in range(3)]                # (N,) each corner's x
+    Y = [xy[:, k, 1].index_select(0, tri) for k in range(3)]
+    d2, cross = None, []
+    for k in range(3):                                                      # edge a→b = v_k→v_k+1
+        ax, ay, bx, by = X[k], Y[k], X[(k + 1) % 3], Y[(k + 1) % 3]
+        ex, ey, wx, wy = bx - ax, by - ay, px - ax, py - ay
+        with torch.no_grad():                                               # the closest point's parameter
+            ee = ex * ex + ey * ey
+            t = ((wx * ex + wy * ey) / torch.where(ee > 0, ee, 1.0)).clamp_(0, 1)
+        # t held constant gives the exact gradient (d² is minimal in t) and no 1/|e|² that could blow up
+        rx, ry = wx - t * ex, wy - t * ey
+        dk = rx * rx + ry * ry                                              # squared distance to the edge
+        d2 = dk if d2 is None else torch.minimum(d2, dk)
+        cross.append(ex * wy - ey * wx)                                     # edge function of the centre
+    with torch.no_grad():
+        area = cross[0] + cross[1] + cross[2]                               # 2 × area, wherever the point
+        inside = (cross[0] * area > 0) & (cross[1] * area > 0) & (cross[2] * area > 0)
+    x = torch.where(inside, d2, -d2) * s
+    if not bary:
+        return x, None
+    area = cross[0] + cross[1] + cross[2]
+    flat = area == 0                                                        # zero area: 1/3 each
+    safe = torch.where(flat, torch.ones_like(area), area)
+    b = [torch.where(flat, 1 / 3, cross[(k + 1) % 3] / safe).clamp(0, 1) for k in range(3)]   # b_k: edge k+1
+    total = b[0] + b[1] + b[2]                                              # >= 1/3 after the clamp
+    return x, [bk / total for bk in b]
+
+
+def _check_soft(mode, sigma, gamma, threshold, eps):
+    if mode not in ("silhouette", "color"):
+        raise ValueError(f"mode must be 'silhouette' or 'color', got {mode!r}")
+    for name, value in (("sigma", sigma), ("gamma", gamma)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    if not (0 < threshold < 1):
+        raise ValueError(f"threshold must lie in (0, 1), got {threshold!r}")
+    if not (0 <= eps < 1):
+        raise ValueError(f"eps (the background's normalised depth) must lie in [0, 1), got {eps!r}")
+
+
+def _colors(face_colors, vertex_colors, verts, faces, dtype):
+    """Checked colour arguments: (F, C) face colours or (V, C) vertex colours (exactly one)."""
+    if (face_colors is None) == (vertex_colors is None):
+        raise ValueError("mode='color' needs exactly one of face_colors (F, C) or vertex_colors (V, C)")
+    name, n = ("face_colors", faces.shape[0]) if vertex_colors is None else ("vertex_colors", verts.shape[0])
+    c = as_tensor(face_colors if vertex_colors is None else vertex_colors, device=verts.device, name=name)
+    if c.dim() != 2 or c.shape[0] != n:
+        raise ValueError(f"{name} must have shape ({n}, C), got {tuple(c.shape)}")
+    return c.to(torch.promote_types(dtype, c.dtype))
+
+
+def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-4, gamma: float = 1e-4,
+                   face_colors=None, vertex_colors=None, background=0.0, threshold: float = 1e-4,
+                   eps: float = 1e-3, cull_backfaces: bool = True) -> torch.Tensor:
+    """Soft rasterization (Liu et al. 2019): a silhouette or colour image smooth in every vertex position.
+
+    mesh: ``verts`` (V, 3) world space, ``faces`` (F, 3) int64; camera: a ``Camera`` (perspective or
+    orthographic). mode: ``"silhouette"`` returns (H, W), the probabilistic OR ``1 - Π (1 - D_j)``;
+    ``"color"`` returns (H, W, C), the softmax over depth with the background as one more term, the colour of
+    a face being ``face_colors`` (F, C) or ``vertex_colors`` (V, C) interpolated with perspective-correct
+    barycentrics (clamped to the triangle outside it). background: (C,) or a number.
+    sigma: sharpness, in the paper's NDC units (image width 2): ``σ_px = σ W² / 4`` px².
+    gamma: the depth softmax's temperature; z is the normalised inverse depth (``_nearness``); eps: the
+    background's z. threshold: a pair (pixel, face) is skipped when its term, relative to the pixel's
+    largest (the background included), is below it: D_j < threshold for silhouettes,
+    ``D_j exp(z_j/γ) < threshold · max_k(D_k exp(z_k/γ), exp(ε/γ))`` for colour, so the error per face is
+    below threshold however small γ is. Candidates come from a screen-space radius: for a silhouette
+    ``r² = σ_px log(1/threshold)``; for colour the radius grows with ``(z_j - ε) / γ``, because a nearer face far
+    outside a pixel can still outweigh the background (the fattening a tiny γ causes).
+    cull_backfaces: skip faces facing away (front faces are CCW). Faces crossing the near plane are clipped.
+    Differentiable w.r.t. verts, the colours and the camera's K, R and t; dtype and device of the inputs.
+    """
+    _check_soft(mode, sigma, gamma, threshold, eps)
+    verts, faces = _check_inputs(mesh, camera)
+    H, W = camera.height, camera.width
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    colors = None if mode == "silhouette" else _colors(face_colors, vertex_colors, verts, faces, dtype)
+    xy, q, face, attr = _screen_faces(verts, faces, camera, cull_backfaces,
+                                      colors if vertex_colors is not None and mode == "color" else None)
+    s = 4.0 / (W * W * sigma)                                               # 1 / σ_px
+    x_max = math.log(1 / threshold)                                         # sigmoid(-x) >= thr ⇒ x <= this
+    if mode == "silhouette":
+        radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
+        pixel, tri = _candidate_pairs(xy.detach().double(), radius, W, H)
+        log_miss = _per_pair(_silhouette_terms, tri, pixel, xy, W, s)      # (N,) log(1 - D_j)
+        log_empty = torch.zeros(H * W, dtype=dtype, device=verts.device).index_add(0, pixel, log_miss)
+        return (-torch.expm1(log_empty)).view(H, W)                         # 1 - Π (1 - D_j), stably
+    near = _nearness(q.detach().double(), camera)                           # (T, 3) z of the corners
+    x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma              # (T,) largest useful x
+    pixel, tri, top, z_top = _color_pairs(xy.detach(), near, (x_reach / s).sqrt(), W, H, s, gamma, eps,
+                                          math.log(threshold))
+    w, wc = _per_pair(_color_terms, tri, pixel, xy, q, face, colors if attr is None else attr, W, s, gamma,
+                      (top - z_top / gamma).to(dtype), z_top.to(dtype), camera)   # (N,), (N, C)
+    w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
+    C = wc.shape[1]
+    bg = as_tensor(background, dtype=wc.dtype, device=wc.device, name="background").expand(C)
+    num = (w_bg[:, None] * bg).index_add(0, pixel, wc)                      # (H*W, C)
+    den = w_bg.index_add(0, pixel, w)
+    return (num / den[:, None]).view(H, W, C)
+
+
+def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
+    """Which pairs matter in colour mode, without gradients. xy: (T, 3, 2) detached, in the dtype the
+    differentiable pass computes in (so both agree on what is kept); near: (T, 3) float64 corner z;
+    radius: (T,) the candidate radius in pixels. First every candidate's log-weight
+    ``log_w = logsigmoid(x) + z/γ`` (float64: z/γ reaches 1e5), then per pixel ``top``, the largest log_w
+    (at least the background's ε/γ), and ``z_top``, the largest z; a pair is kept if log_w - top >= log_thr.
+    Returns pixel (N,), tri (N,) of the kept pairs and top, z_top (H*W,) float64. The differentiable pass
+    takes each weight as ``exp((z - z_top)/γ + logsigmoid(x) - (top - z_top/γ))``: nothing of size 1/γ
+    reaches float32."""
+    pixel, tri = _candidate_pairs(xy.double(), radius, W, H)
+    top = torch.full((H * W,), eps / gamma, dtype=torch.float64, device=xy.device)
+    z_top = torch.full((H * W,), eps, dtype=torch.float64, device=xy.device)
+    log_w = torch.empty(pixel.shape, dtype=torch.float64, device=xy.device)
+    with torch.no_grad():
+        for lo in range(0, pixel.numel(), CHUNK):                           # bounded memory
+            pix, t = pixel[lo:lo + CHUNK], tri[lo:lo + CHUNK]
+            x, b = _pair_terms(xy, t, pix, W, s)                            # as stage B computes them
+            nt = near.index_select(0, t)                                    # (n, 3) float64
+            z = b[0] * nt[:, 0] + b[1] * nt[:, 1] + b[2] * nt[:, 2]         # z is affine in q
+            log_w[lo:lo + CHUNK] = torch.nn.functional.logsigmoid(x.double()) + z / gamma
+            z_top.scatter_reduce_(0, pix, z, reduce="amax")
+        top.scatter_reduce_(0, pixel, log_w, reduce="amax")
+        keep = (log_w - top[pixel] >= log_thr).nonzero().squeeze(1)
+    return pixel[keep], tri[keep], top, z_top
+
+
+def _per_pair(fn, tri, pixel, *args):
+    """``fn(tri, pixel, *args)`` over the pairs, CHUNK at a time. With gradients, each chunk beyond the first
+    is recomputed during backward instead of stored (``torch.utils.checkpoint``), so memory stays bounded
+    however many pairs σ and γ ask for; a single chunk (the common case) runs plainly."""
+    if pixel.numel() <= CHUNK:
+        return fn(tri, pixel, *args)
+    grad = torch.is_grad_enabled()
+    parts = [checkpoint(fn, tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args, use_reentrant=False) if grad
+             else fn(tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args) for lo in range(0, pixel.numel(), CHUNK)]
+    return tuple(map(torch.cat, zip(*parts))) if isinstance(parts[0], tuple) else torch.cat(parts)
+
+
+def _silhouette_terms(tri, pixel, xy, W, s):
+    """log(1 - D) of each pair: ``logsigmoid(-δ d² / σ_px)``."""
+    x, _ = _pair_terms(xy, tri, pixel, W, s, bary=False)
+    return torch.nn.functional.logsigmoid(-x)
+
+
+def _color_terms(tri, pixel, xy, q, face, colors, W, s, gamma, top, z_top, camera):
+    """Each pair's softmax weight ``D exp((z - z_top)/γ - top)`` (N,) and weighted colour (N, C); colors is
+    (F, C) face colours or (T, 3, C) the screen triangles' vertex colours. top, z_top: (H*W,) per pixel."""
+    x, b = _pair_terms(xy, tri, pixel, W, s)                                # (N,), 3 × (N,)
+    qt = [q[:, k].index_select(0, tri) for k in range(3)]                   # 3 × (N,)
+    z = _nearness(b[0] * qt[0] + b[1] * qt[1] + b[2] * qt[2], camera)       # q is affine on screen
+    w = torch.exp(torch.nn.functional.logsigmoid(x) + (z - z_top[pixel]) / gamma - top[pixel])   # <= ~1
+    if colors.dim() == 2:
+        c = colors[face[tri]]                                               # (N, C) flat colour
+    else:
+        pc = b if camera.orthographic else [bk * qk for bk, qk in zip(b, qt)]   # perspective-correct
+        total = pc[0] + pc[1] + pc[2]
+        c = sum((pc[k] / total)[:, None] * colors[:, k].index_select(0, tri) for k in range(3))   # (N, C)
+    return w, w[:, None] * c
+
+
+# ------------------------------------------------------------------------- NMR's approximate gradient
+
+class NMRGradient(torch.autograd.Function):
+    """Identity on the image in forward; in backward, the Neural 3D Mesh Renderer's approximate gradient of
+    the image w.r.t. the screen positions of the vertices (Kato et al. 2018), and ∂L/∂I passed through to
+    the image itself (so colours get their usual gradient). Use through ``nmr_image``."""
+
+    @staticmethod
+    def forward(ctx, verts_screen, image, scene):
+        ctx.scene = scene                                                   # a dict of detached tensors
+        ctx.save_for_backward(verts_screen, image)
+        return image.clone()
+
+    @staticmethod
+    def backward(ctx, d_image):
+        verts_screen, image = ctx.saved_tensors
+        d_screen = _nmr_backward(verts_screen.detach(), image.detach(), d_image, **ctx.scene)
+        return d_screen.to(verts_screen.dtype), d_image, None
+
+
+def nmr_image(image, mesh, camera, face_id, *, face_values=None, background=0.0, cull_backfaces: bool = True,
+              reach: float | None = None, min_step: float = 0.5) -> torch.Tensor:
+    """Attach NMR's approximate visibility gradient to an image rendered from hard fragments.
+
+    image: (H, W, C) any shading of the fragments (its own gradient, e.g. to colours or through the
+    barycentrics, is kept); face_id: (H, W) int64 from the same ``rasterize`` call (-1: background).
+    face_values: optional (F, C), the colour a face would give a pixel it newly covers (flat shading);
+    without it, the colour of the face's nearest pixel along the row or column is used (the paper's code
+    does the same), and the pixel is skipped where that pixel does not show the face. background: (C,) or a
+    number, the colour beyond the image border. reach: how many pixels beyond an edge, along a row or
+    column, a pixel can be and still receive a gradient from it (None: the whole image). min_step: the
+    floor on |δx| in pixels. Faces crossing the near plane contribute no visibility gradient (their
+    projected vertices are meaningless), nor do faces entirely beyond the far plane. Returns the image's
+    values, with a backward that follows Kato et al.'s rule to ``mesh.verts`` and, through the projection,
+    to the camera's K, R and t.
+    """
+    verts, faces = _check_inputs(mesh, camera)
+    H, W = camera.height, camera.width
+    if image.dim() != 3 or tuple(image.shape[:2]) != (H, W):
+        raise ValueError(f"image must have shape (H, W, C) = ({H}, {W}, C), got {tuple(image.shape)}")
+    if tuple(face_id.shape) != (H, W):
+        raise ValueError(f"face_id must have shape (H, W) = ({H}, {W}), got {tuple(face_id.shape)}")
+    if not (min_step > 0) or (reach is not None and not reach >= 0):
+        raise ValueError(f"need min_step > 0 and reach >= 0 (or None), got {min_step!r}, {reach!r}")
+    C = image.shape[2]
+    with torch.no_grad():
+        v = _camera_space(verts, camera)                                    # (V, 3) float64
+        z = v[faces][..., 2]
+        keep = (_min3(z) >= camera.near) & (_min3(z) <= camera.far)
+        if cull_backfaces:
+            fv = v[faces]
+            normal = torch.linalg.cross(fv[:, 1] - fv[:, 0], fv[:, 2] - fv[:, 0])
+            keep &= (normal[:, 2] < 0) if camera.orthographic else ((normal * fv[:, 0]).sum(-1) < 0)
+        fids = keep.nonzero().squeeze(1)
+        nearness = -v[:, 2] if camera.orthographic else 1 / v[:, 2]        # affine on screen, larger = nearer
+        depth_q = torch.full((H * W,), -math.inf, dtype=torch.float64, device=verts.device)
+        hit = (face_id.reshape(-1) >= 0).nonzero().squeeze(1)
+        xy, _ = _project(v, camera, camera.K.detach().double())             # (V, 2)
+        tri = faces[face_id.reshape(-1)[hit]]                               # (M, 3) the visible faces
+        q_r, dq = _row_plane(xy[tri, 0], xy[tri, 1], nearness[tri], (hit // W).double() + 0.5)
+        depth_q[hit] = q_r + dq * ((hit % W).double() + 0.5)               # their q at the pixel centres
+    if face_values is not None:
+        face_values = as_tensor(face_values, device=verts.device, name="face_values").double()
+        if tuple(face_values.shape) != (faces.shape[0], C):
+            raise ValueError(f"face_values must have shape ({faces.shape[0]}, {C}) (faces, image channels), "
+                             f"got {tuple(face_values.shape)}")
+    bg = as_tensor(background, dtype=torch.float64, device=verts.device, name="background").expand(C)
+    scene = dict(faces=faces[fids], fids=fids, q=nearness, face_id=face_id.reshape(-1), depth_q=depth_q,
+                 face_values=face_values, bg=bg, H=H, W=W, ortho=camera.orthographic,
+                 reach=math.inf if reach is None else float(reach), min_step=float(min_step))
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    verts_cam = world_to_camera(verts.to(dtype), camera.R.to(dtype), camera.t.to(dtype))
+    verts_screen, _ = _project_safe(verts_cam, camera, camera.K.to(dtype))  # (V, 2) differentiable
+    return NMRGradient.apply(verts_screen, image, scene)
+
+
+def nmr_rasterize(mesh, camera, *, face_colors=None, background=0.0, cull_backfaces: bool = True,
+                  reach: float | None = None, min_step: float = 0.5) -> torch.Tensor:
+    """The hard rasterizer's image with NMR's approximate gradient (Kato et al. 2018).
+
+    face_colors: None for a silhouette, returned as (H, W) (1 where a face is visible); or (F, C) flat
+    face colours, returned as (H, W, C), background (C,) or a number elsewhere. reach, min_step: see
+    ``nmr_image``. Gradients flow to ``mesh.verts``, to ``face_colors`` and to the camera's K, R and t.
+    """
+    verts, faces = _check_inputs(mesh, camera)
+    frags = rasterize(mesh, camera, cull_backfaces=cull_backfaces)
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    if face_colors is None:
+        image = frags.mask.to(dtype)[..., None]                             # (H, W, 1)
+        values = torch.ones(faces.shape[0], 1, dtype=dtype, device=verts.device)
+    else:
+        values = as_tensor(face_colors, device=verts.device, name="face_colors")
+        if values.dim() != 2 or values.shape[0] != faces.shape[0]:
+            raise ValueError(f"face_colors must have shape ({faces.shape[0]}, C), got {tuple(values.shape)}")
+        bg = as_tensor(background, dtype=values.dtype, device=values.device, name="background")
+        image = torch.where(frags.mask[..., None], values[frags.face_id.clamp(min=0)], bg.expand(values.shape[1]))
+    out = nmr_image(image, mesh, camera, frags.face_id, face_values=values.detach(), background=background,
+                    cull_backfaces=cull_backfaces, reach=reach, min_step=min_step)
+    return out[..., 0] if face_colors is None else out
+
+
+def _nmr_backward(verts_screen, image, d_image, *, faces, fids, q, face_id, depth_q, face_values, bg, H, W,
+                  ortho, reach, min_step):
+    """∂L/∂(screen positions) (V, 2) by NMR's rule: rows give x, columns give y (the same code, transposed)."""
+    dt = torch.promote_types(verts_screen.dtype, image.dtype)              # the working dtype
+    d = torch.zeros(verts_screen.shape[0], 2, dtype=dt, device=verts_screen.device)
+    if faces.shape[0] == 0:
+        return d
+    u, v, q, bg = verts_screen[:, 0].to(dt), verts_screen[:, 1].to(dt), q.to(dt), bg.to(dt)
+    face_values = None if face_values is None else face_values.to(dt)
+    img, g = image.detach().to(dt).reshape(H, W, -1), d_image.to(dt).reshape(H, W, -1)
+    maps = dict(face_id=face_id.view(H, W), depth_q=depth_q.to(dt).view(H, W), image=img, g=g)
+    for axis, (a, b, m) in enumerate(((u, v, maps), (v, u, {k: t.transpose(0, 1) for k, t in maps.items()}))):
+        m = {k: t.reshape(t.shape[0] * t.shape[1], *t.shape[2:]) for k, t in m.items()}
+        n_rows, n_cols = (H, W) if axis == 0 else (W, H)
+        d[:, axis] = _nmr_scan(a, b, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, reach, min_step)
+    return d
+
+
+def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, reach, min_step):
+    """∂L/∂u (V,) for the coordinate u along rows of constant v (the centrepiece of NMR's backward).
+
+    For every face and every row whose centre v_c it spans, the two edges crossing the row at u_l <= u_r;
+    for each, the pixels from the crossing outward (up to ``reach``) and across the span inward. A pixel at
+    u_p needs the edge (a, b) to move by δ = u_p - u_e, i.e. vertex a by δ / s_a (s_a its weight on the edge
+    at this row), floored at ``min_step``; its colour would change by δI (covered: the face's colour, if the
+    face is nearer than what is there; uncovered: the colour across the edge, if the face is the visible
+    one). The term ∂L/∂I · δI / δx is kept only where ∂L/∂I · δI < 0.
+    """
+    tu, tv, tq = u[faces], v[faces], q[faces]                               # (T, 3)
+    first = torch.ceil(_min3(tv) - 0.5).clamp(min=0)                        # rows with centre in [v_min, v_max)
+    last = (torch.ceil(_max3(tv) - 0.5) - 1).clamp(max=n_rows - 1)
+    tri_of_seg, start = _expand((last - first + 1).clamp(min=0).long())
+    row = first[tri_of_seg] + torch.arange(tri_of_seg.numel(), device=u.device) - start[tri_of_seg]
+    vc = (row + 0.5)[:, None]                                               # (S, 1)
+    va, vb = tv[tri_of_seg], tv[tri_of_seg].roll(-1, 1)                     # (S, 3) edges a→b
+    ua, ub = tu[tri_of_seg], tu[tri_of_seg].roll(-1, 1)
+    valid = (torch.minimum(va, vb) <= vc) & (vc < torch.maximum(va, vb))    # the edge crosses the row
+    s_a = torch.where(valid, (vc - vb) / torch.where(valid, va - vb, 1.0), 0.0)   # a's weight at the crossing
+    ue = ub + s_a * (ua - ub)                                               # (S, 3) crossings
+    left = torch.where(valid, ue, math.inf).argmin(1, keepdim=True)         # (S, 1) edge index
+    right = torch.where(valid, ue, -math.inf).argmax(1, keepdim=True)
+    ok = (valid.sum(1) == 2).nonzero().squeeze(1)                           # a row meets exactly two edges
+    # one entry per (segment, side): side 0 the left edge (inside is +u), 1 the right edge (inside is -u)
+    seg = torch.cat([ok, ok])
+    edge = torch.cat([left[ok, 0], right[ok, 0]])
+    side = torch.cat([torch.zeros_like(ok), torch.ones_like(ok)]).to(u.dtype)
+    ul, ur = ue.gather(1, left)[seg, 0], ue.gather(1, right)[seg, 0]        # the span of the row
+    u_e, s_e = ue[seg, edge], s_a[seg, edge]                                # this side's crossing, weight
+    t, r = tri_of_seg[seg], row[seg]
+    f, vid_a, vid_b = fids[t], faces[t, edge], faces[t, (edge + 1) % 3]
+    base = r.long() * n_cols                                                # flat index of the row's start
+    img, g, face_id, depth_q = m["image"], m["g"], m["face_id"], m["depth_q"]
+    # uncovering (inside): the colour across the edge, the background beyond the border
+    across = torch.where(side == 0, torch.ceil(u_e - 0.5) - 1, torch.floor(u_e - 0.5) + 1)
+    a_ok = (across >= 0) & (across < n_cols)
+    behind = torch.where(a_ok[:, None], img[base + across.clamp(0, n_cols - 1).long()], bg)   # (2S', C)
+    # covering (outside): the face's colour (or that of its nearest pixel in the row, if it shows the face)
+    if face_values is not None:
+        colour, c_ok = face_values[f], torch.ones_like(a_ok)
+    else:
+        c_pix = base + torch.where(side == 0, torch.ceil(u_e - 0.5), torch.floor(u_e - 0.5)).clamp(
+            0, n_cols - 1).long()
+        colour, c_ok = img[c_pix], face_id[c_pix] == f
+    # the face's q along the row, q(u) = q_r + dq u: nearer than what a pixel shows if q(u_p) > depth_q
+    # (q: 1/z, or -z for an orthographic camera: larger is nearer; -inf on the background)
+    q_r, dq = _row_plane(tu[t], tv[t], tq[t], r + 0.5)
+    lo = torch.where(side == 0, torch.ceil(ul - reach - 0.5), torch.ceil(ul - 0.5)).clamp(min=0)
+    hi = torch.where(side == 0, torch.floor(ur - 0.5), torch.floor(ur + reach - 0.5)).clamp(max=n_cols - 1)
+    elem, e_start = _expand((hi - lo + 1).clamp(min=0).long())              # one element per (edge, pixel)
+    take = lambda a: a.index_select(0, elem)                                # noqa: E731  per-entry → per-element
+    col = take(lo) + torch.arange(elem.numel(), device=u.device) - take(e_start)
+    up = col + 0.5                                                          # (E,) the pixel centre's u
+    pix = take(base) + col.long()
+    inside = (up >= take(ul)) & (up <= take(ur))
+    here = img.index_select(0, pix)                                         # (E, C)
+    q_p = take(q_r) + take(dq) * up
+    nearer = (q_p > depth_q.index_select(0, pix)) & (ortho or (q_p > 0))    # q_p <= 0: the plane is behind us
+    dI = torch.where(inside[:, None], take(behind), take(colour)) - here    # (E, C)
+    use = torch.where(inside, face_id.index_select(0, pix) == take(f), nearer & take(c_ok))
+    dot = (g.index_select(0, pix) * dI).sum(1) * use                        # δᴾ · δI
+    dot = torch.where(dot < 0, dot, 0.0)                                    # the sign rule
+    sd = take(side)
+    direction = torch.where(inside, 1.0 - 2.0 * sd, 2.0 * sd - 1.0)         # which way the vertex moves
+    dist = (up - take(u_e)).abs()
+    out = torch.zeros_like(u)
+    for w, vid in ((s_e, vid_a), (1 - s_e, vid_b)):
+        # δx = δ / w, floored at min_step: ∂L/∂x = dot / δx = dot · w / (direction · max(|δ|, min_step · w))
+        w = take(w)
+        den = torch.maximum(dist, min_step * w).clamp(min=torch.finfo(u.dtype).tiny)
+        out.index_add_(0, take(vid), dot * w * direction / den)
+    return out
+
+
+def _row_plane(tu, tv, tq, vc):
+    """The affine function through (tu_k, tv_k, tq_k), k = 0..2, on the line v = vc: ``q = q_r + dq u``.
+    tu, tv, tq: (N, 3); vc: (N,). Returns q_r, dq (N,) each (0 for a degenerate triangle)."""
+    e1u, e1v, e2u, e2v = tu[:, 1] - tu[:, 0], tv[:, 1] - tv[:, 0], tu[:, 2] - tu[:, 0], tv[:, 2] - tv[:, 0]
+    d1, d2 = tq[:, 1] - tq[:, 0], tq[:, 2] - tq[:, 0]
+    det = e1u * e2v - e1v * e2u
+    det = torch.where(det == 0, torch.ones_like(det), det)
+    du, dv = (d1 * e2v - d2 * e1v) / det, (d2 * e1u - d1 * e2u) / det       # the gradient of q on screen
+    return tq[:, 0] + du * (0 - tu[:, 0]) + dv * (vc - tv[:, 0]), du
