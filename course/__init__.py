@@ -37,6 +37,7 @@ from .render import RenderResult, RenderSettings, Scene
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, linear_to_srgb,
                       phong, sample_texture, srgb_to_linear)
 from .shadows import SpotLight, shadow_factor, shadow_map
+from .soft import nmr_image, nmr_rasterize, soft_rasterize
 
 __version__ = "0.1.0"
 
@@ -53,6 +54,8 @@ __all__ = [
     "supersample", "adaptive_supersample", "exact_coverage",
     # shadows and ray tracing
     "shadow_map", "shadow_factor", "SpotLight", "BVH", "raycast",
+    # differentiable rasterization
+    "soft_rasterize", "nmr_rasterize", "nmr_image",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
     "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",

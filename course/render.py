@@ -42,10 +42,12 @@ from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.raytrace import BVH
 from course.raytrace import visible as ray_visible
 from course.shading import (
-    AmbientLight, DirectionalLight, Material, PointLight, flat_shading, gouraud_shading, mip_pyramid, normalize,
-    phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions, wireframe_overlay,
+    AmbientLight, DirectionalLight, Material, PointLight, _face_material, flat_shading, gouraud_shading, light_terms,
+    mip_pyramid, normalize, phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions,
+    wireframe_overlay,
 )
 from course.shadows import shadow_factor, shadow_map
+from course.soft import nmr_image, soft_rasterize
 from course.tensors import as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
@@ -58,6 +60,8 @@ FORCEABLE = ("normals", "lighting", "texture", "autograd")
 ANTIALIAS_MODES = ("none", "supersample", "adaptive")
 SHADOW_MODES = ("none", "map", "rays")
 TEXTURE_FILTERS = ("bilinear", "nearest", "trilinear")
+VISIBILITY_MODES = ("hard", "nmr", "soft")
+SOFT_SHADING = ("phong", "gouraud", "flat", "unlit", "silhouette")
 
 
 # -------------------------------------------------------------------------------------- scene and settings
@@ -136,6 +140,13 @@ class RenderSettings:
     ``"rays"`` (lecture 07: a shadow ray per pixel and light through a BVH of the scene). A light's direct
     contribution (diffuse and highlight) is weighted per pixel by how lit the pixel is; ambient light is
     never shadowed.
+    visibility (lecture 08): ``"hard"`` (the z-buffer: no gradient where visibility changes), ``"nmr"`` (the same
+    image, with the Neural 3D Mesh Renderer's approximate gradient for vertex positions and the camera) or
+    ``"soft"`` (soft rasterization, ``sigma`` / ``gamma`` / ``soft_threshold`` as in ``soft.soft_rasterize``: a
+    blurred image, smooth in every vertex). Soft rasterization shades at the vertices (``"phong"`` and
+    ``"gouraud"`` both give Gouraud shading) or per face (``"flat"``) and blends those colours; it draws
+    ``"phong"``, ``"gouraud"``, ``"flat"``, ``"unlit"`` and ``"silhouette"``, without textures, shadows,
+    antialiasing or a wireframe (a clear error says so). NMR needs ``antialias="none"``.
     """
     shading: str = "phong"
     texture_filter: str = "bilinear"
@@ -155,6 +166,10 @@ class RenderSettings:
     shadows: str = "none"
     shadow_resolution: int = 1024
     shadow_pcf: int = 1
+    visibility: str = "hard"
+    sigma: float = 1e-4
+    gamma: float = 1e-4
+    soft_threshold: float = 1e-4
 
     def __post_init__(self):
         if self.shading not in SHADING_MODES:
@@ -175,6 +190,22 @@ class RenderSettings:
             raise ValueError(f"shadow_resolution must be a positive int, got {self.shadow_resolution!r}")
         if not isinstance(self.shadow_pcf, int) or self.shadow_pcf < 1 or self.shadow_pcf % 2 == 0:
             raise ValueError(f"shadow_pcf must be a positive odd int, got {self.shadow_pcf!r}")
+        if self.visibility not in VISIBILITY_MODES:
+            raise ValueError(f"visibility must be one of {', '.join(map(repr, VISIBILITY_MODES))}, "
+                             f"got {self.visibility!r}")
+        for name in ("sigma", "gamma", "soft_threshold"):
+            if not 0 < getattr(self, name) < math.inf:
+                raise ValueError(f"{name} must be a positive number, got {getattr(self, name)!r}")
+        if self.visibility == "nmr" and self.antialias != "none":
+            raise ValueError("visibility='nmr' needs antialias='none': its gradient is that of the pixel centres")
+        if self.visibility == "soft":
+            unsupported = {"antialias": self.antialias != "none", "shadows": self.shadows != "none",
+                           "wireframe": self.wireframe, "shading": self.shading not in SOFT_SHADING}
+            bad = [k for k, v in unsupported.items() if v]
+            if bad:
+                raise ValueError(f"visibility='soft' blends per-vertex or per-face colours and cannot draw "
+                                 f"{', '.join(bad)} as set here (shading must be one of {', '.join(SOFT_SHADING)}; "
+                                 "antialias 'none', shadows 'none', no wireframe)")
 
 
 @dataclass(frozen=True)
@@ -217,7 +248,8 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
     wanted = {
         "join": len(scene.meshes) > 1,
         "cull_backfaces": settings.cull_backfaces,
-        "rasterize": True,
+        "rasterize": settings.visibility != "soft" or settings.return_depth or settings.return_normals,
+        "soft_rasterize": settings.visibility == "soft",
         "texture": mode in COLOR_MODES and settings.textures and any(map(_has_texture, scene.meshes)),
         "vertex_colors": mode in COLOR_MODES and any(m.vert_colors is not None for m in scene.meshes),
         "normals": lit or mode == "normals" or settings.return_normals,
@@ -229,6 +261,9 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
         "wireframe": settings.wireframe or mode == "wireframe",
         "autograd": _needs_grad(scene),
     }
+    wanted["nmr"] = settings.visibility == "nmr" and wanted["autograd"]    # the forward is the hard image
+    if settings.visibility == "soft":                                       # lecture 08: no per-pixel passes
+        wanted["texture"] = wanted["shadow_maps"] = wanted["shadow_rays"] = False
     return tuple(name for name, on in wanted.items() if on)
 
 
@@ -414,6 +449,8 @@ def render(scene: Scene, settings: RenderSettings | None = None, *, _force: Sequ
 
 def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
     geo = _join(scene.meshes)                                                # one mesh, per-face mesh index
+    if "soft_rasterize" in passes:
+        return _run_soft(scene, settings, passes, geo)
     frags = rasterize(geo.mesh, scene.camera, cull_backfaces=settings.cull_backfaces)
     if not frags.mask.any():                                                 # nothing visible: nothing to shade
         ran = tuple(p for p in passes if p in ("join", "cull_backfaces", "rasterize", "autograd"))
@@ -432,7 +469,66 @@ def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
         passes = tuple(p for p in passes if p in ran or p not in ("detect_edges", "supersample"))
         if "wireframe" in passes and "supersample" in ran:                  # lines over the filtered image
             image = wire(image).clamp(0, 1) if settings.clamp else wire(image)
+    if "nmr" in passes:                                                     # lecture 08: same image, NMR's gradient
+        nmr = lambda img, values=None: nmr_image(img, geo.mesh, scene.camera, frags.face_id, face_values=values,
+                                                 background=0.0 if values is not None else scene.background,
+                                                 cull_backfaces=settings.cull_backfaces)
+        image = nmr(image)
+        if settings.return_silhouette:
+            ones = torch.ones(geo.mesh.faces.shape[0], 1, dtype=silhouette.dtype, device=silhouette.device)
+            silhouette = nmr(silhouette[..., None], ones)[..., 0]
     return _result(image, frags, pixel_normals, settings, passes, silhouette)
+
+
+def _run_soft(scene: Scene, settings: RenderSettings, passes: tuple, geo) -> RenderResult:
+    """Soft rasterization (lecture 08): colours at the vertices (or faces), blended by ``soft_rasterize``."""
+    mesh, camera, mode = geo.mesh, scene.camera, settings.shading
+    like = mesh.verts
+    bg = as_tensor(scene.background, dtype=like.dtype, device=like.device).reshape(3)
+    soft = dict(sigma=settings.sigma, gamma=settings.gamma, threshold=settings.soft_threshold,
+                cull_backfaces=settings.cull_backfaces)
+    silhouette = None
+    if mode == "silhouette" or settings.return_silhouette:
+        silhouette = soft_rasterize(mesh, camera, mode="silhouette", **soft)     # (H, W)
+    if mode == "silhouette":                                                # one flat colour per mesh's
+        table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
+                             for m in scene.materials])                     # material, as in hard mode
+        image = soft_rasterize(mesh, camera, mode="color", face_colors=table[geo.face_mesh], background=bg,
+                               **soft)
+    else:
+        table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
+                             for m in scene.materials])
+        base = table[geo.vert_mesh]                                         # (V, 3) material colour
+        if "vertex_colors" in passes:
+            has = torch.tensor([m.vert_colors is not None for m in scene.meshes], device=like.device)
+            base = torch.where(has[geo.vert_mesh][:, None], _per_vertex(scene.meshes, "vert_colors", 3, like),
+                               base)
+        one = len(set(map(id, scene.materials))) == 1
+        if "lighting" in passes and mode == "flat":                         # one colour per face, at its centroid
+            points = mesh.verts[mesh.faces].mean(1)
+            mat = scene.materials[0] if one else _face_material((scene.materials, geo.face_mesh),
+                                                                 torch.arange(len(points), device=like.device), points)
+            diffuse, specular = light_terms(points, mesh.face_normals(), view_directions(points, camera),
+                                            scene.lights, mat)
+            colors = dict(face_colors=base[mesh.faces].mean(1) * diffuse + specular)
+        elif "lighting" in passes:                                          # Gouraud: lit at the vertices
+            mat = scene.materials[0] if one else _face_material((scene.materials, geo.vert_mesh),
+                                                                 torch.arange(len(like), device=like.device), like)
+            normals = _vertex_normals(scene.meshes, like)
+            diffuse, specular = light_terms(like, normals, view_directions(like, camera), scene.lights, mat)
+            colors = dict(vertex_colors=base * diffuse + specular)
+        else:
+            colors = dict(vertex_colors=base)
+        image = soft_rasterize(mesh, camera, mode="color", background=bg, **colors, **soft)
+    if settings.clamp:
+        image = image.clamp(0, 1)
+    frags = rasterize(mesh, camera, cull_backfaces=settings.cull_backfaces) if "rasterize" in passes else None
+    normals = None
+    if settings.return_normals:
+        normals = _pixel_normals(geo, frags, _vertex_normals(scene.meshes, like), flat=mode == "flat")
+    return RenderResult(image=image, depth=frags.depth if settings.return_depth else None, normals=normals,
+                        silhouette=silhouette if settings.return_silhouette else None, fragments=frags,
+                        passes=passes)
 
 
 def _shade(scene, geo, frags, settings, passes, depth_range=None, spacing=1.0, shadows=None):
