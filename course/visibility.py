@@ -1,0 +1,587 @@
+"""Visibility gradients: the derivative of a box-filtered image, by every method of lecture 09, side by side.
+
+The quantity. Each pixel of the box-filtered image is the integral of the scene's colour over the pixel's
+unit square; a loss ``L = Σ weights ⊙ image`` is a number, and ``image_gradient`` returns dL/dπ for the
+parameters π: the mesh's vertices, the camera's R, t and focal length, the colours.
+
+Why it is hard. Inside a face the colour is smooth in π, but where one face meets another (or the
+background) it jumps, and the jump moves when π moves. Differentiating under the integral misses that:
+``d/dπ ∫_A f ≠ ∫_A ∂f/∂π`` when f jumps. The Reynolds transport theorem gives the missing part, a boundary
+integral: for a pixel square A split into regions of colour c_k,
+
+    d/dπ ∫_A f dx = ∫_A ∂f/∂π dx + Σ_boundaries ∫ (c_in - c_out) v_n ds,
+
+with v_n the speed at which the boundary moves along its outward normal (from the "in" region into the
+"out" one). With flat-coloured faces (``model="flat"``) the first term is zero: everything is boundary.
+
+The methods (``method=``), each a function of this module:
+
+* ``"exact"``: autograd through the closed-form image (``coverage.exact_coverage``: every pixel as a sum
+  of visible polygon areas), chunk by chunk so that memory stays bounded. The ground truth.
+* ``"finite_differences"``: ``(L(π + h) - L(π - h)) / 2h`` (``scheme="central"``) or the forward
+  difference, one parameter at a time, on the closed-form image in ``dtype``. A vertex moves only the pixels
+  its faces touch, so only those are evaluated again (a crop of the camera). On large meshes pass
+  ``vertices=`` (a seeded subset): the other entries come back as NaN, not computed.
+* ``"reynolds"``: the boundary integral, by Gauss-Legendre quadrature of ``order`` points on every piece of
+  every edge between two pixel borders. At each point the visible face just inside and just outside the
+  edge (one sample of the z-buffer on each side) says whether the edge is a boundary there and what jumps.
+* ``"edge_sampling"`` (Li, Aittala, Durand and Lehtinen, SIGGRAPH Asia 2018): the same integrand at
+  ``samples`` random points on the edges, chosen with probability proportional to their length. Unbiased;
+  its variance falls as 1 / samples.
+* ``"nmr"`` and ``"soft"``: the gradients of lecture 08, of a different image (the hard one, or a blurred
+  one): ``soft.nmr_rasterize`` and ``soft.soft_rasterize``. They are here to be compared, not because they
+  estimate this derivative.
+
+Boundaries counted once. A point x on the edge of face f is a boundary of f's visible region when f is what
+the z-buffer shows just inside the edge; the region then grows at rate ``(c_f - c_out) v_n``. An edge two
+faces share is found from both (each sees the other outside): each counts half. A silhouette fold is found
+from the face in front only (the one behind is not visible inside its edge), an occluding edge from the
+occluder only, and an edge whose face is hidden on both sides adds nothing. Visibility along an edge changes
+only where another edge or an intersection line crosses it, so the pieces are cut there and one quadrature
+point per piece decides. Lines where two faces pass through each other (``antialias._intersecting_faces``)
+are boundaries too: there the line n_f = n_g (the faces' nearness planes on screen) moves at
+``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The far plane is not a boundary here (faces are taken whole up to it).
+
+Status (lecture 09 is still to come): only ``model="flat"``; the affine-colour model, the reparameterization
+view and the ``bench gradients`` command are next. Known gap: where a back face and a front face fold within a
+pixel at a grazing silhouette, ``"reynolds"`` can disagree with ``"exact"`` in that pixel (seen on the 1,280-face
+icosphere at 256² from an off-axis camera: 3.5e-2 relative overall, from two pixels).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from .camera import Camera
+from .antialias import _crossing_segments, _intersecting_faces
+from .coverage import _region_chunks, exact_coverage
+from .raster import _camera_space, _check_inputs, _screen_triangles
+from .scan import EMPTY_KEY, _depth_keys, _faces_of, _plane, _sample_inside, pixel_triangle_pairs
+from .soft import _screen_faces, nmr_rasterize, soft_rasterize
+from .tensors import as_tensor
+
+__all__ = ["image_gradient", "METHODS", "PARAMETERS", "boundary_points", "boundary_gradient"]
+
+METHODS = ("exact", "finite_differences", "edge_sampling", "reynolds", "nmr", "soft")
+PARAMETERS = ("verts", "R", "t", "focal", "colors")
+OFFSET = 1e-6            # pixels: how far beside an edge the z-buffer is asked what is visible
+
+
+# ------------------------------------------------------------------------------------ parameters
+
+class _Problem:
+    """The inputs of ``image_gradient``, checked, with the parameters as leaf tensors that require grad."""
+
+    def __init__(self, mesh, camera, colors, weights, background, model, dtype=None):
+        verts, faces = _check_inputs(mesh, camera)
+        if model not in ("flat",):
+            raise ValueError(f"model must be 'flat' (flat-coloured faces), got {model!r}")
+        self.dtype = dtype or torch.promote_types(verts.dtype, camera.dtype)
+        dev = verts.device
+        c = as_tensor(colors, device=dev, name="colors")
+        if c.shape != (faces.shape[0], 3):
+            raise ValueError(f"colors must be (F, 3) face colours for model='flat', F = {faces.shape[0]}, "
+                             f"got {tuple(c.shape)}")
+        w = as_tensor(weights, device=dev, name="weights")
+        if w.shape != (camera.height, camera.width, 3):
+            raise ValueError(f"weights must have shape (H, W, 3) = ({camera.height}, {camera.width}, 3), got "
+                             f"{tuple(w.shape)}")
+        bg = as_tensor(background, device=dev, name="background")
+        if bg.shape != (3,):
+            raise ValueError(f"background must have shape (3,), got {tuple(bg.shape)}")
+        for name, x in (("colors", c), ("weights", w), ("background", bg)):
+            if not torch.isfinite(x).all():
+                raise ValueError(f"{name} contains NaN or inf")
+        self.faces, self.camera0 = faces, camera
+        self.weights, self.background = w.to(self.dtype), bg.to(self.dtype)
+        self.params = {"verts": verts.detach().to(self.dtype), "R": camera.R.detach().to(self.dtype),
+                       "t": camera.t.detach().to(self.dtype), "focal": camera.K[0, 0].detach().to(self.dtype),
+                       "colors": c.detach().to(self.dtype)}
+
+    def leaves(self, names):
+        """Fresh leaf copies of the parameters, those in ``names`` requiring grad."""
+        return {k: v.clone().requires_grad_(k in names) for k, v in self.params.items()}
+
+    def camera(self, p, crop=None):
+        """The camera of the parameters p; ``crop`` (x0, y0, w, h) keeps only those pixels."""
+        K0 = self.camera0.K.detach().to(self.dtype)
+        scale = p["focal"] / K0[0, 0]                                       # fx and fy scale together
+        K = torch.cat([K0[:2] * scale, K0[2:]])
+        W, H = self.camera0.width, self.camera0.height
+        if crop is not None:
+            x0, y0, W, H = crop
+            K = K - torch.tensor([[0.0, 0, x0], [0, 0, y0], [0, 0, 0]], dtype=K.dtype, device=K.device)
+        return Camera(K, p["R"], p["t"], W, H, self.camera0.near, self.camera0.far, self.camera0.orthographic)
+
+    def mesh(self, p):
+        return _Mesh(p["verts"], self.faces)
+
+
+class _Mesh:
+    def __init__(self, verts, faces):
+        self.verts, self.faces = verts, faces
+
+
+def _grads(p, names):
+    return tuple(p[n].grad if p[n].grad is not None else torch.zeros_like(p[n]) for n in names)
+
+
+# -------------------------------------------------------------------------------------- exact
+
+def exact_gradient(prob: _Problem, names):
+    """Autograd through ``exact_coverage``, one chunk of pixels at a time: L is a sum over chunks, so each
+    chunk's part is differentiated and let go (the per-face geometry's graph is kept between them)."""
+    p = prob.leaves(names)
+    cam, mesh = prob.camera(p), prob.mesh(p)
+    w = prob.weights.reshape(-1, 3)
+    colors = p["colors"] - prob.background                                   # image = bg + Σ area (c - bg)
+    leaves = [p[n] for n in names]
+    total = [torch.zeros_like(x) for x in leaves]
+    for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype):
+        if regions.pixel.numel() == 0:
+            continue
+        part = (w[regions.pixel] * regions.area[:, None] * colors[regions.face]).sum()
+        if not part.requires_grad:
+            continue
+        g = torch.autograd.grad(part, leaves, retain_graph=True, allow_unused=True)
+        total = [a + (b if b is not None else 0) for a, b in zip(total, g)]
+    return tuple(total)
+
+
+# ---------------------------------------------------------------------------- finite differences
+
+def _loss(prob, p, crop=None):
+    w = prob.weights
+    if crop is not None:
+        x0, y0, W, H = crop
+        w = w[y0:y0 + H, x0:x0 + W]
+    image = exact_coverage(prob.mesh(p), prob.camera(p, crop), p["colors"], prob.background)
+    return (w * image).sum()
+
+
+def _reach(prob, p, vertex, step):
+    """The pixels a move of ``vertex`` by up to ``step`` can change: the box around the projections of its
+    faces (one pixel of margin, and the vertex moved by ±step), clipped to the image; None if none."""
+    faces = prob.faces[(prob.faces == vertex).any(1)]
+    if faces.numel() == 0:
+        return None
+    cam = prob.camera(p)
+    v = p["verts"].detach()[faces.reshape(-1)]
+    moved = [v]
+    for sgn in (1.0, -1.0):
+        for axis in range(3):
+            d = torch.zeros_like(v)
+            d[:, axis] = sgn * step
+            moved.append(v + d)
+    xy, depth = cam.project(torch.cat(moved))
+    if (depth <= cam.near).any() or not torch.isfinite(xy).all():
+        return (0, 0, cam.width, cam.height)                                # near plane: the whole image
+    x0 = max(int(math.floor(float(xy[:, 0].min()))) - 1, 0)
+    y0 = max(int(math.floor(float(xy[:, 1].min()))) - 1, 0)
+    x1 = min(int(math.ceil(float(xy[:, 0].max()))) + 1, cam.width)
+    y1 = min(int(math.ceil(float(xy[:, 1].max()))) + 1, cam.height)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return (x0, y0, x1 - x0, y1 - y0)
+
+
+def fd_gradient(prob: _Problem, names, step=1e-4, scheme="central", vertices=None):
+    """Finite differences of L, one parameter entry at a time, in the problem's dtype (see module docstring)."""
+    if scheme not in ("central", "forward"):
+        raise ValueError(f"scheme must be 'central' or 'forward', got {scheme!r}")
+    if not step > 0:
+        raise ValueError(f"step must be positive, got {step!r}")
+    out = []
+    with torch.no_grad():
+        base = prob.leaves(())
+        for name in names:
+            x = base[name]
+            g = torch.full_like(x, math.nan) if name == "verts" and vertices is not None else torch.zeros_like(x)
+            if name == "verts":
+                ids = range(x.shape[0]) if vertices is None else [int(i) for i in vertices]
+                entries = [(i, a) for i in ids for a in range(3)]
+            else:
+                entries = list(np.ndindex(*x.shape)) if x.dim() else [()]
+            for e in entries:
+                crop = None
+                if name == "verts":
+                    crop = _reach(prob, base, e[0], step)
+                    if crop is None:
+                        g[e] = 0.0
+                        continue
+                def at(delta):
+                    p = dict(base)
+                    y = x.clone()
+                    y[e] = y[e] + delta
+                    p[name] = y
+                    return _loss(prob, p, crop)
+                if scheme == "central":
+                    g[e] = (at(step) - at(-step)) / (2 * step)
+                else:
+                    g[e] = (at(step) - at(0.0)) / step
+            out.append(g)
+    return tuple(out)
+
+
+# ------------------------------------------------------------------ the boundary: Reynolds, edge sampling
+
+def _edges(prob, p) -> "_Edges":
+    """Every face's edges on screen (differentiable endpoints, the normal out of the face, the welded vertex
+    ids of the endpoints, -1 for points the near-plane clip made), then the faces' intersection lines."""
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, False)      # (T, 3, 2), (T,)
+    T = xy.shape[0]
+    ids = torch.full((T, 3), -1, dtype=torch.int64, device=xy.device)
+    # the faces that were not clipped come first, in order, with their own corners
+    whole = _whole_count(face)
+    weld = _weld(prob.params["verts"])
+    ids[:whole] = weld[prob.faces[face[:whole]]]
+    a, b, c = xy, xy.roll(-1, 1), xy.roll(-2, 1)                            # edge k: corner k → k+1
+    va, vb = ids, ids.roll(-1, 1)
+    d = (b - a).detach()
+    n = torch.stack([d[..., 1], -d[..., 0]], -1)
+    inward = ((c.detach() - a.detach()) * n).sum(-1) > 0
+    n = torch.where(inward[..., None], -n, n)
+    n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-300)
+    keep = (d.norm(dim=-1) > 0).reshape(-1)
+    area = (d[:, 0, 0] * (c - a).detach()[:, 0, 1] - d[:, 0, 1] * (c - a).detach()[:, 0, 0]).abs()
+    keep &= (area > 0)[:, None].expand(T, 3).reshape(-1)                   # a zero-area face bounds nothing
+    sel = keep.nonzero().squeeze(1)
+    flat = lambda x: x.reshape(T * 3, *x.shape[2:]).index_select(0, sel)
+    edges = _Edges(flat(a), flat(b), flat(n), face[:, None].expand(T, 3).reshape(-1).index_select(0, sel),
+                   torch.stack([flat(va), flat(vb)], 1), None)
+    return _with_crossings(edges, prob, p, weld)
+
+
+class _Edges:
+    """Curves along which the image may jump, as screen segments a → b (E, 2): the first ones are face edges
+    (differentiable endpoints), then the lines where two faces pass through each other (detached endpoints;
+    ``other`` (K,) the second face, the first being ``face``). n (E, 2): the unit normal pointing out of the
+    region of ``face``; vid (E, 2): welded vertex ids of a face edge's endpoints (-1: none)."""
+
+    def __init__(self, a, b, n, face, vid, other):
+        self.a, self.b, self.n, self.face, self.vid, self.other = a, b, n, face, vid, other
+        self.n_edges = a.shape[0] if other is None else a.shape[0] - other.shape[0]
+
+
+def _planes(verts_cam, faces, K, orthographic):
+    """The nearness of each face on screen as a plane n(x, y) = A x + B y + C, (F, 3), differentiable: 1/z
+    for a pinhole camera, -z for an orthographic one (larger = nearer; as ``coverage`` defines it)."""
+    v = verts_cam[faces]
+    normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    d = (normal * v[:, 0]).sum(-1)
+    Kinv = torch.linalg.inv(K)
+    tiny = torch.finfo(v.dtype).tiny ** 0.5
+    safe = lambda x: torch.where(x.abs() < tiny, torch.where(x < 0, -tiny, tiny), x)
+    if orthographic:
+        e3 = torch.tensor([0.0, 0.0, 1.0], dtype=K.dtype, device=K.device)
+        return (normal[:, :1] * Kinv[0] + normal[:, 1:2] * Kinv[1] - d[:, None] * e3) / safe(normal[:, 2:])
+    return (normal @ Kinv) / safe(d)[:, None]
+
+
+def _with_crossings(edges, prob, p, weld):
+    """Append the lines where two faces pass through each other (``antialias._intersecting_faces``): for a
+    pair (f, g), the segment where f meets g's plane, projected; the image jumps along the part that lies in
+    g and is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
+    verts = prob.params["verts"]
+    f, g = _intersecting_faces(verts.double(), prob.faces, weld)
+    if f.numel() == 0:
+        return edges
+    seg, ok = _crossing_segments(verts.double(), prob.faces, f, g)          # (N, 3, 2, 3), (N, 3)
+    pair, k = ok.nonzero().unbind(1)
+    ends = seg[pair, k]                                                     # (M, 2, 3) world
+    cam = prob.camera0
+    xy, z = cam.project(ends.reshape(-1, 3).to(cam.dtype))
+    xy, z = xy.double().view(-1, 2, 2), z.double().view(-1, 2)
+    keep = (z > cam.near).all(1) & torch.isfinite(xy).all(2).all(1)
+    pair, xy = pair[keep], xy[keep]
+    if pair.numel() == 0:
+        return edges
+    fa, ga = f[pair], g[pair]
+    with torch.no_grad():
+        P = _planes(cam.to_camera(verts.to(cam.dtype)).double(), prob.faces, cam.K.double(), cam.orthographic)
+        grad = (P[fa] - P[ga])[:, :2]                                       # ∇(n_f - n_g): toward f nearer
+        n = -grad / grad.norm(dim=1, keepdim=True).clamp_min(1e-300)        # out of f's region
+    dtype = edges.a.dtype
+    none = torch.full((pair.numel(), 2), -1, dtype=torch.int64, device=pair.device)
+    return _Edges(torch.cat([edges.a, xy[:, 0].to(dtype)]), torch.cat([edges.b, xy[:, 1].to(dtype)]),
+                  torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, fa]), torch.cat([edges.vid, none]),
+                  ga)
+
+
+def _whole_count(face):
+    """_screen_faces lists the unclipped faces first, in increasing id order, then the clipped pieces."""
+    if face.numel() < 2:
+        return face.numel()
+    down = (face[1:] <= face[:-1]).nonzero()
+    return int(down[0]) + 1 if down.numel() else face.numel()
+
+
+def _weld(verts):
+    """(V,) a canonical id per vertex position: vertices at the same place get the same id."""
+    _, inverse = torch.unique(verts.detach(), dim=0, return_inverse=True)
+    return inverse
+
+
+def _pixel_segments(a, b, W, H):
+    """Every edge a → b (E, 2 each, detached) cut at the pixel borders it crosses: the pieces' parameter
+    intervals [s0, s1] (N,), their edge (N,) and pixel (N,) (row-major; pieces outside the image dropped)."""
+    E = a.shape[0]
+    ts = [torch.zeros(E, dtype=a.dtype, device=a.device), torch.ones(E, dtype=a.dtype, device=a.device)]
+    owners = [torch.arange(E, device=a.device)] * 2
+    for axis in range(2):
+        lo, hi = torch.minimum(a[:, axis], b[:, axis]), torch.maximum(a[:, axis], b[:, axis])
+        first = torch.floor(lo) + 1
+        count = (torch.ceil(hi) - first).clamp(min=0).long()               # integers strictly inside (lo, hi)
+        count = torch.where(hi > lo, count, torch.zeros_like(count))
+        edge = torch.repeat_interleave(torch.arange(E, device=a.device), count)
+        k = first[edge] + (torch.arange(edge.numel(), device=a.device)
+                           - torch.repeat_interleave(torch.cumsum(count, 0) - count, count))
+        ts.append(((k - a[edge, axis]) / (b[edge, axis] - a[edge, axis])).clamp(0, 1))
+        owners.append(edge)
+    s, edge = torch.cat(ts), torch.cat(owners)
+    order = torch.argsort(edge.double() * 4 + s)                            # by edge, then along it
+    s, edge = s[order], edge[order]
+    same = edge[1:] == edge[:-1]
+    s0, s1, e = s[:-1][same], s[1:][same], edge[:-1][same]
+    keep = s1 > s0
+    s0, s1, e = s0[keep], s1[keep], e[keep]
+    mid = a[e] + ((s0 + s1) / 2)[:, None] * (b[e] - a[e])
+    col, row = torch.floor(mid[:, 0]), torch.floor(mid[:, 1])
+    inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+    return _split_at_crossings(a, b, s0[inside], s1[inside], e[inside], (row * W + col)[inside].long())
+
+
+def _split_at_crossings(a, b, s0, s1, e, pixel):
+    """Cut every piece of edge (s0, s1, edge e, pixel) where another piece in the same pixel crosses it.
+    Visibility along an edge can change only there (where an occluder's outline passes over it), so each
+    resulting piece is visible all along or nowhere, and one quadrature point decides it."""
+    order = torch.argsort(pixel, stable=True)
+    s0, s1, e, pixel = s0[order], s1[order], e[order], pixel[order]
+    _, counts = torch.unique_consecutive(pixel, return_counts=True)
+    start = torch.repeat_interleave(torch.cumsum(counts, 0) - counts, counts)     # first piece of the pixel
+    size = torch.repeat_interleave(counts, counts)
+    i = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), size)   # every (i, j) pair
+    j = start[i] + (torch.arange(i.numel(), device=pixel.device)
+                    - torch.repeat_interleave(torch.cumsum(size, 0) - size, size))
+    i, j = i[e[i] != e[j]], j[e[i] != e[j]]
+    ai, di = a[e[i]], b[e[i]] - a[e[i]]
+    aj, dj = a[e[j]], b[e[j]] - a[e[j]]
+    den = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
+    r = aj - ai
+    ok = den != 0
+    safe = torch.where(ok, den, torch.ones_like(den))
+    s = (r[:, 0] * dj[:, 1] - r[:, 1] * dj[:, 0]) / safe                   # along i
+    u = (r[:, 0] * di[:, 1] - r[:, 1] * di[:, 0]) / safe                   # along j
+    cut = ok & (s > s0[i]) & (s < s1[i]) & (u >= s0[j]) & (u <= s1[j])
+    piece = torch.cat([torch.arange(pixel.numel(), device=pixel.device)] * 2 + [i[cut]])
+    t = torch.cat([s0, s1, s[cut]])
+    order = torch.argsort(piece.double() * 4 + (t - s0[piece]) / (s1[piece] - s0[piece]).clamp_min(1e-300))
+    piece, t = piece[order], t[order]
+    same = piece[1:] == piece[:-1]
+    lo, hi, owner = t[:-1][same], t[1:][same], piece[:-1][same]
+    keep = hi > lo
+    return lo[keep], hi[keep], e[owner[keep]], pixel[owner[keep]]
+
+
+def _visible_at(mesh, camera, pts, budget: int = 1 << 21):
+    """The face the z-buffer shows at screen points (N, 2), -1 for background or outside the image: the
+    sample z-buffer of ``rasterize(samples=...)`` (same coverage rule, depth keys and far plane), asked at
+    arbitrary points. Each point is tested against the triangles touching its pixel."""
+    W, H = camera.width, camera.height
+    col, row = torch.floor(pts[:, 0]), torch.floor(pts[:, 1])
+    ok = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+    out = torch.full((pts.shape[0],), -1, dtype=torch.int64, device=pts.device)
+    idx = ok.nonzero().squeeze(1)
+    with torch.no_grad():
+        st = _screen_triangles(_camera_space(mesh.verts, camera), mesh.faces, camera, False, reach=0.0)
+        if idx.numel() == 0 or st.face.numel() == 0:
+            return out
+        pix = (row * W + col)[idx].long()
+        p = pts[idx].double()
+        order = torch.argsort(pix)
+        sorted_pix = pix[order]
+        mask = torch.zeros(H * W, dtype=torch.bool, device=pts.device)
+        mask[pix] = True
+        pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)
+        first = torch.searchsorted(sorted_pix, pair_pix)
+        count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+        q0, qx, qy = _plane(st)
+        zbuf = torch.full((idx.numel(),), EMPTY_KEY, dtype=torch.int64, device=pts.device)
+        ends = torch.cumsum(count, 0)
+        lo = 0
+        while lo < pair_pix.numel():                                        # about ``budget`` tests at a time
+            hi = int(torch.searchsorted(ends, ends[lo] - count[lo] + budget, right=True).clamp(min=lo + 1))
+            c = count[lo:hi]
+            pair = torch.repeat_interleave(torch.arange(lo, hi, device=pts.device), c)
+            k = order[first[pair] + (torch.arange(pair.numel(), device=pts.device)
+                                     - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]
+            t = tri[pair]
+            x = p[k]
+            inside = _sample_inside(st.xy[t], x[:, None, :])[:, 0]
+            k, t, x = k[inside], t[inside], x[inside]
+            q = q0[t] + qx[t] * x[:, 0] + qy[t] * x[:, 1]
+            depth = q.float() if camera.orthographic else q.float().reciprocal_()
+            keep = depth <= camera.far
+            keys = _depth_keys(depth[keep], st.face[t][keep], positive=not camera.orthographic)
+            zbuf.scatter_reduce_(0, k[keep], keys, reduce="amin")
+            lo = hi
+        out[idx] = _faces_of(zbuf)
+    return out
+
+
+def boundary_points(prob: _Problem, p, *, order=None, samples=None, generator=None):
+    """Points on the edges where the integrand of the boundary term is evaluated, with their weights.
+
+    Quadrature (``order``): Gauss-Legendre nodes on every piece of edge inside one pixel, weight = node
+    weight × the piece's length. Sampling (``samples``): points on the edges with probability proportional
+    to length, weight = total length / samples. Returns edge data and per point: edge (N,), s (N,),
+    weight (N,), pixel (N,).
+    """
+    edges = _edges(prob, p)
+    a, b = edges.a, edges.b
+    W, H = prob.camera0.width, prob.camera0.height
+    ad, bd = a.detach(), b.detach()
+    length = (bd - ad).norm(dim=1)
+    if order is not None:
+        s0, s1, e, pix = _pixel_segments(ad, bd, W, H)
+        x, w = np.polynomial.legendre.leggauss(int(order))
+        x = torch.as_tensor(x, dtype=s0.dtype, device=s0.device)
+        w = torch.as_tensor(w, dtype=s0.dtype, device=s0.device)
+        half = (s1 - s0) / 2
+        s = ((s0 + s1) / 2)[:, None] + half[:, None] * x                   # (N, q)
+        weight = (half * length[e])[:, None] * w
+        q = x.numel()
+        e, pix = e[:, None].expand(-1, q).reshape(-1), pix[:, None].expand(-1, q).reshape(-1)
+        s, weight = s.reshape(-1), weight.reshape(-1)
+    else:
+        total = length.sum()
+        if samples is None or int(samples) < 1:
+            raise ValueError(f"samples must be a positive int, got {samples!r}")
+        if float(total) == 0:
+            empty = torch.zeros(0, dtype=torch.int64, device=a.device)
+            return edges, empty, a.new_zeros(0).detach(), a.new_zeros(0).detach(), empty
+        e = torch.multinomial(length / total, int(samples), replacement=True, generator=generator)
+        s = torch.rand(int(samples), dtype=ad.dtype, generator=generator).to(ad.device)
+        weight = torch.full_like(s, float(total) / int(samples))
+        pt = ad[e] + s[:, None] * (bd[e] - ad[e])
+        col, row = torch.floor(pt[:, 0]), torch.floor(pt[:, 1])
+        inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+        e, s, weight = e[inside], s[inside], weight[inside]
+        pix = (row * W + col)[inside].long()
+    return edges, e, s, weight, pix
+
+
+def boundary_gradient(prob: _Problem, names, *, order=None, samples=None, generator=None):
+    """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
+    differentiated by autograd through the edges' screen positions (see the module docstring)."""
+    p = prob.leaves(names)
+    edges, e, s, weight, pix = boundary_points(prob, p, order=order, samples=samples, generator=generator)
+    a, b, n, face, vid = edges.a, edges.b, edges.n, edges.face, edges.vid
+    leaves = [p[k] for k in names]
+    if e.numel() == 0:
+        return tuple(torch.zeros_like(x) for x in leaves)
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    with torch.no_grad():
+        x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
+        inside = _visible_at(mesh, cam, x - OFFSET * n[e])
+        outside = _visible_at(mesh, cam, x + OFFSET * n[e])
+        f = face[e]
+        on = inside == f                                                    # f shows just inside: a boundary
+        colors = p["colors"].detach()
+        c_out = torch.where((outside >= 0)[:, None], colors[outside.clamp(min=0)], prob.background)
+        jump = colors[f] - c_out                                            # (N, 3)
+        # an edge the outside face shares (same welded endpoints) is found from both faces: half each
+        other = _weld(prob.params["verts"])[prob.faces[outside.clamp(min=0)]]   # (N, 3)
+        shared = (outside >= 0) & (vid[e] >= 0).all(1) & (other == vid[e][:, :1]).any(1) & \
+                 (other == vid[e][:, 1:]).any(1)
+        value = (prob.weights.reshape(-1, 3)[pix] * jump).sum(1) * weight * torch.where(shared, 0.5, 1.0)
+        value = torch.where(on, value, torch.zeros_like(value))
+    keep = (value != 0).nonzero().squeeze(1)
+    e, s, value = e[keep], s[keep], value[keep]
+    # face edges: the point moves with the edge's ends, d/dπ (n · x) = v_n
+    m = e < edges.n_edges
+    xq = a[e[m]] + s[m, None] * (b[e[m]] - a[e[m]])                         # differentiable in π
+    surrogate = (value[m] * (xq * n[e[m]]).sum(1)).sum()                    # d/dπ = Σ value · v_n
+    if (~m).any():                                                          # intersection lines: where
+        k = e[~m]                                                           # n_f - n_g = 0, moving at
+        cam = prob.camera(p)                                                # v_n = ∂(n_f - n_g)/∂π / |∇|
+        planes = _planes(cam.to_camera(p["verts"]), prob.faces, cam.K, cam.orthographic)
+        L = planes[face[k]] - planes[edges.other[k - edges.n_edges]]        # (N, 3)
+        x = (a[k] + s[~m, None] * (b[k] - a[k])).detach()
+        size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
+        surrogate = surrogate + (value[~m] * (L[:, 0] * x[:, 0] + L[:, 1] * x[:, 1] + L[:, 2]) / size).sum()
+    if not surrogate.requires_grad:
+        return tuple(torch.zeros_like(x) for x in leaves)
+    g = torch.autograd.grad(surrogate, leaves, allow_unused=True)
+    return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+
+
+# ------------------------------------------------------------------------------- NMR and soft (lecture 08)
+
+def _other_image_gradient(prob, names, render):
+    p = prob.leaves(names)
+    image = render(prob.mesh(p), prob.camera(p), p["colors"], prob.background)
+    loss = (prob.weights * image).sum()
+    leaves = [p[k] for k in names]
+    g = torch.autograd.grad(loss, leaves, allow_unused=True)
+    return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+
+
+# ------------------------------------------------------------------------------------- the front door
+
+def image_gradient(mesh, camera, colors, weights, *, method, model="flat", background=(0.0, 0.0, 0.0),
+                   wrt=None, **options):
+    """The gradient of ``L = Σ weights ⊙ image`` (the box-filtered image) by one method of lecture 09.
+
+    mesh: ``verts`` (V, 3), ``faces`` (F, 3); camera: a ``Camera`` (perspective or orthographic); colors: (F, 3)
+    face colours (``model="flat"``); weights: (H, W, 3); background: (3,). method: one of ``METHODS`` (module
+    docstring). wrt: None for d L / d mesh.verts, (V, 3); or a sequence of ``PARAMETERS`` names ("verts", "R",
+    "t", "focal" (K[0, 0], with K[1, 1] scaled along), "colors"), and a tuple comes back in that order.
+    options: ``dtype`` (every method; default promote(verts, camera)); finite_differences: ``step`` (1e-4),
+    ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
+    reynolds: ``order`` (Gauss points per pixel piece of edge, 1); edge_sampling: ``samples`` (1000),
+    ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma`` (1e-4), ``threshold``; nmr: ``reach``.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    names = ("verts",) if wrt is None else tuple(wrt)
+    bad = [n for n in names if n not in PARAMETERS]
+    if bad or not names:
+        raise ValueError(f"wrt must name some of {', '.join(PARAMETERS)}, got {wrt!r}")
+    dtype = options.pop("dtype", None)
+    prob = _Problem(mesh, camera, colors, weights, background, model, dtype)
+    if method == "exact":
+        grads = exact_gradient(prob, names, **options)
+    elif method == "finite_differences":
+        grads = fd_gradient(prob, names, **options)
+    elif method in ("reynolds", "edge_sampling"):
+        geo = [n for n in names if n != "colors"]
+        if method == "reynolds":
+            g = boundary_gradient(prob, geo, order=options.pop("order", 1))
+        else:
+            generator = options.pop("generator", None)
+            if generator is None:
+                generator = torch.Generator().manual_seed(int(options.pop("seed", 0)))
+            g = boundary_gradient(prob, geo, samples=options.pop("samples", 1000), generator=generator)
+        if options:
+            raise TypeError(f"unexpected options for {method}: {', '.join(options)}")
+        by_name = dict(zip(geo, g))
+        if "colors" in names:                                               # linear: the exact derivative
+            by_name["colors"] = exact_gradient(prob, ("colors",))[0]
+        grads = tuple(by_name[n] for n in names)
+    elif method == "nmr":
+        reach = options.pop("reach", None)
+        grads = _other_image_gradient(prob, names, lambda m, c, col, bg: nmr_rasterize(
+            m, c, face_colors=col, background=bg, cull_backfaces=False, reach=reach))
+    else:
+        sigma, gamma = options.pop("sigma", 1e-4), options.pop("gamma", 1e-4)
+        threshold = options.pop("threshold", 1e-4)
+        grads = _other_image_gradient(prob, names, lambda m, c, col, bg: soft_rasterize(
+            m, c, mode="color", face_colors=col, background=bg, sigma=sigma, gamma=gamma, threshold=threshold,
+            cull_backfaces=False))
+    if method in ("nmr", "soft") and options:
+        raise TypeError(f"unexpected options for {method}: {', '.join(options)}")
+    return grads[0] if wrt is None else grads

@@ -1,0 +1,155 @@
+"""Visibility gradients (course.visibility): every method against the exact gradient of the box-filtered image."""
+import math
+
+import pytest
+import torch
+
+from course.camera import Camera
+from course.mesh import Mesh, join_meshes
+from course.models import icosphere
+from course.visibility import PARAMETERS, image_gradient
+
+ALL = ("verts", "R", "t", "focal", "colors")
+
+
+def problem(kind="sphere", ortho=False, size=(32, 40), seed=0):
+    """Scenes where the exact gradient exists (no vertex on a pixel border, no symmetric edge on one: the
+    camera is off-axis), with flat random colours and random weights."""
+    if kind == "sphere":
+        mesh = icosphere(1, dtype=torch.float64)
+    else:                                                                   # two spheres
+        a, b = icosphere(2, dtype=torch.float64), icosphere(2, dtype=torch.float64)
+        shift = torch.tensor([0.5, 0.3, 1.9 if kind == "occlusion" else 1.0], dtype=torch.float64)
+        mesh = join_meshes([a, Mesh(b.verts * 0.6 + shift, b.faces)])      # "intersect": they cross
+    H, W = size
+    if ortho:
+        cam = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), ortho_height=3.0, width=W, height=H,
+                             dtype=torch.float64)
+    else:
+        cam = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), fov_y=50.0, width=W, height=H, dtype=torch.float64)
+    g = torch.Generator().manual_seed(seed)
+    colors = torch.rand(mesh.faces.shape[0], 3, generator=g, dtype=torch.float64)
+    weights = torch.randn(H, W, 3, generator=g, dtype=torch.float64)
+    return mesh, cam, colors, weights
+
+
+def rel(a, b):
+    return float((a - b).norm() / b.norm().clamp_min(1e-300))
+
+
+@pytest.mark.parametrize("kind, ortho", [("sphere", False), ("occlusion", False), ("occlusion", True),
+                                         ("intersect", False), ("intersect", True)])
+def test_reynolds_equals_the_exact_gradient(kind, ortho):
+    """Flat colours: the boundary integral is exact with one point per piece of edge once the pieces are cut
+    where visibility can change (pixel borders, other edges, intersection lines), so the two agree to
+    rounding (float64: 1e-12 leaves room for sums over thousands of terms)."""
+    mesh, cam, colors, weights = problem(kind, ortho)
+    exact = image_gradient(mesh, cam, colors, weights, method="exact", background=(0.2, 0.1, 0.3), wrt=ALL)
+    reyn = image_gradient(mesh, cam, colors, weights, method="reynolds", background=(0.2, 0.1, 0.3), wrt=ALL)
+    for name, x, y in zip(ALL, reyn, exact):
+        assert y.abs().sum() > 0, name
+        assert rel(x, y) < 1e-12, (name, rel(x, y))
+    two = image_gradient(mesh, cam, colors, weights, method="reynolds", order=2, background=(0.2, 0.1, 0.3))
+    assert rel(two, exact[0]) < 1e-12
+
+
+def test_finite_differences_match_exact_and_their_step_trade_off():
+    """Central differences: truncation error O(h²) for large h, round-off O(eps / h) for small h; in float64
+    h = 1e-6 lands between the two (error ~1e-7 here), in float32 no step gets close."""
+    mesh, cam, colors, weights = problem()
+    exact = image_gradient(mesh, cam, colors, weights, method="exact")
+    vertices = [0, 5, 11]
+    sub = lambda g: g[vertices]
+    fd = image_gradient(mesh, cam, colors, weights, method="finite_differences", step=1e-6, vertices=vertices)
+    assert torch.isnan(fd[1]).all() and not torch.isnan(sub(fd)).any()   # the others: not computed
+    assert rel(sub(fd), sub(exact)) < 1e-5
+    big = image_gradient(mesh, cam, colors, weights, method="finite_differences", step=1e-2, vertices=vertices)
+    assert rel(sub(big), sub(exact)) > 10 * rel(sub(fd), sub(exact))
+    f32 = image_gradient(mesh, cam, colors, weights, method="finite_differences", step=1e-6, vertices=vertices,
+                         dtype=torch.float32)
+    assert rel(sub(f32).double(), sub(exact)) > 1e-2                      # round-off: eps32 / h ~ 0.1
+    fwd = image_gradient(mesh, cam, colors, weights, method="finite_differences", step=1e-6, scheme="forward",
+                         vertices=vertices)
+    assert rel(sub(fwd), sub(exact)) < 1e-3
+    t, = image_gradient(mesh, cam, colors, weights, method="finite_differences", step=1e-6, wrt=("t",))
+    t_exact, = image_gradient(mesh, cam, colors, weights, method="exact", wrt=("t",))
+    assert rel(t, t_exact) < 1e-5
+
+
+def test_edge_sampling_is_unbiased_and_its_error_falls_like_one_over_sqrt_samples():
+    """With a fixed seed per run: the mean over runs approaches the exact gradient, and the RMS error at 16x
+    the samples is about 4x smaller (between 2.5x and 6.5x allows for the spread of 12 runs)."""
+    mesh, cam, colors, weights = problem()
+    exact = image_gradient(mesh, cam, colors, weights, method="exact")
+
+    def runs(n, k=12):
+        return torch.stack([image_gradient(mesh, cam, colors, weights, method="edge_sampling", samples=n, seed=s)
+                            for s in range(k)])
+
+    few, many = runs(500), runs(8000)
+    rms = lambda g: float(((g - exact) ** 2).sum((1, 2)).mean().sqrt())
+    ratio = rms(few) / rms(many)
+    assert 2.5 < ratio < 6.5, ratio
+    # unbiased: the mean of 12 runs is off by about the error of one run / sqrt(12); allow 2x that
+    assert float((many.mean(0) - exact).norm()) < 2 * rms(many) / math.sqrt(12)
+    again = image_gradient(mesh, cam, colors, weights, method="edge_sampling", samples=500, seed=0)
+    assert torch.equal(again, few[0])                                      # seeded
+
+
+def test_nmr_and_soft_give_finite_gradients_of_their_own_images():
+    mesh, cam, colors, weights = problem()
+    exact = image_gradient(mesh, cam, colors, weights, method="exact")
+    for method, opts in (("nmr", {}), ("soft", dict(sigma=1e-4, gamma=1e-2))):
+        g = image_gradient(mesh, cam, colors, weights, method=method, **opts)
+        assert torch.isfinite(g).all() and g.abs().sum() > 0
+        cos = float((g * exact).sum() / (g.norm() * exact.norm()))
+        assert cos > 0.3, (method, cos)                                   # related, not equal
+
+
+def test_degenerate_inputs_give_finite_gradients():
+    """A zero-area face, an edge-on face, a vertex exactly on a pixel centre and one on a pixel corner, and a
+    face crossing the near plane."""
+    v = torch.tensor([[-0.5, -0.4, 0.0], [0.6, -0.3, 0.0], [0.0, 0.5, 0.0],        # an ordinary face
+                      [0.1, 0.1, 0.2], [0.2, 0.2, 0.2], [0.3, 0.3, 0.2],           # zero area (collinear)
+                      [0.0, -0.2, 0.1], [0.0, 0.3, 0.1], [0.0, 0.0, 0.6],          # edge-on (in x = 0)
+                      [-0.3, 0.2, 2.7], [0.3, 0.25, 2.7], [0.0, -0.3, 3.5]],       # crosses the near plane
+                     dtype=torch.float64)
+    mesh = Mesh(v, torch.arange(12).view(4, 3))
+    cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=50.0, width=16, height=16, near=0.5,
+                         dtype=torch.float64)
+    # move vertex 0 onto a pixel centre and vertex 1 onto a pixel corner
+    for k, target in ((0, (4.5, 11.5)), (1, (12.0, 11.0))):
+        xy, z = cam.project(v[k:k + 1])
+        K = cam.K
+        v[k, 0] += (target[0] - float(xy[0, 0])) * float(z[0]) / float(K[0, 0])
+        v[k, 1] -= (target[1] - float(xy[0, 1])) * float(z[0]) / float(K[1, 1])
+    mesh = Mesh(v, torch.arange(12).view(4, 3))
+    g = torch.Generator().manual_seed(1)
+    colors = torch.rand(4, 3, generator=g, dtype=torch.float64)
+    weights = torch.randn(16, 16, 3, generator=g, dtype=torch.float64)
+    for method, opts in (("exact", {}), ("reynolds", {}), ("edge_sampling", dict(samples=2000)),
+                         ("finite_differences", dict(step=1e-6)), ("soft", {}), ("nmr", {})):
+        out = image_gradient(mesh, cam, colors, weights, method=method, wrt=ALL, **opts)
+        for name, x in zip(ALL, out):
+            assert torch.isfinite(x).all(), (method, name)
+
+
+def test_bad_inputs_are_named():
+    mesh, cam, colors, weights = problem()
+    with pytest.raises(ValueError, match="method"):
+        image_gradient(mesh, cam, colors, weights, method="magic")
+    with pytest.raises(ValueError, match="wrt"):
+        image_gradient(mesh, cam, colors, weights, method="exact", wrt=("verts", "zoom"))
+    with pytest.raises(ValueError, match="colors"):
+        image_gradient(mesh, cam, colors[:-1], weights, method="exact")
+    with pytest.raises(ValueError, match="weights"):
+        image_gradient(mesh, cam, colors, weights[:-1], method="exact")
+    with pytest.raises(ValueError, match="model"):
+        image_gradient(mesh, cam, colors, weights, method="exact", model="affine")
+    with pytest.raises(ValueError, match="NaN"):
+        image_gradient(mesh, cam, colors * math.nan, weights, method="exact")
+    with pytest.raises(ValueError, match="scheme"):
+        image_gradient(mesh, cam, colors, weights, method="finite_differences", scheme="sideways")
+    with pytest.raises(TypeError, match="unexpected"):
+        image_gradient(mesh, cam, colors, weights, method="reynolds", samples=10)
+    assert PARAMETERS == ALL
