@@ -1,0 +1,201 @@
+"""Lecture 08's graded tasks (course/grading/lecture08.py): the references agree with course.soft.soft_rasterize,
+they score full marks, a solution written as a student would scores full marks without calling them, typical
+mistakes lose points with the diagnosis a student can act on, and calling the package scores 0."""
+import pytest
+import torch
+
+from course import soft
+from course.camera import Camera
+from course.grading import TASKS, run_check, tasks_for_lecture
+from course.grading import lecture08
+from course.grading.lecture08 import soft_blend_reference, soft_coverage_reference, soft_silhouette_reference
+from course.mesh import Mesh
+
+# the public references are forbidden to students; these call the same code under its private names
+REFERENCES = {"8.1": lambda tri, *a: lecture08._coverage(tri, *a).to(tri.dtype),
+              "8.2": lambda D: lecture08._silhouette(D).to(D.dtype),
+              "8.3": lambda D, *a: lecture08._blend(D, *a).to(D.dtype)}
+
+
+# ------------------------------------------------------------------------------ solutions, as students write
+
+def coverage(tri, height, width, sigma, ndc=True, square=True, segments=True, centre=0.5, flip=False,
+             winding=0, guard=True):
+    y, x = torch.meshgrid(torch.arange(height, dtype=tri.dtype) + centre,
+                          torch.arange(width, dtype=tri.dtype) + centre, indexing="ij")
+    d2, cross = [], []
+    for k in range(3):
+        a, b = tri[k], tri[(k + 1) % 3]
+        e, wx, wy = b - a, x - a[0], y - a[1]
+        ee = (e * e).sum()
+        if guard:
+            ee = torch.where(ee > 0, ee, torch.ones_like(ee))
+        t = (wx * e[0] + wy * e[1]) / ee
+        if segments:
+            t = t.clamp(0, 1)
+        d2.append((wx - t * e[0]) ** 2 + (wy - t * e[1]) ** 2)
+        cross.append(e[0] * wy - e[1] * wx)
+    d2 = torch.stack(d2).amin(0)
+    area = sum(cross) if winding == 0 else torch.full_like(x, float(winding))
+    inside = (cross[0] * area > 0) & (cross[1] * area > 0) & (cross[2] * area > 0)
+    d = d2 if square else d2.sqrt()
+    if ndc:
+        d = d * (4.0 / width ** 2 if square else 2.0 / width)
+    return torch.sigmoid(torch.where(inside != flip, d, -d) / sigma)
+
+
+def soft_coverage(tri, height, width, sigma):
+    return coverage(tri, height, width, sigma)
+
+
+def soft_silhouette(D):
+    return -torch.expm1(torch.log1p(-D).sum(0))
+
+
+def soft_blend(D, z, colors, background, gamma, eps):
+    log_w = torch.log(D) + z / gamma                                      # (F, H, W)
+    log_b = torch.full_like(log_w[0], eps / gamma)
+    top = torch.maximum(log_w.amax(0), log_b)
+    w, w_b = torch.exp(log_w - top), torch.exp(log_b - top)
+    num = (w[..., None] * colors[:, None, None, :]).sum(0) + w_b[..., None] * background
+    return num / (w.sum(0) + w_b)[..., None]
+
+
+SOLUTIONS = {"8.1": soft_coverage, "8.2": soft_silhouette, "8.3": soft_blend}
+
+
+# ------------------------------------------------------------------------------------------ mistakes
+
+def naive_blend(D, z, colors, background, gamma, eps):
+    w, w_b = D * torch.exp(z / gamma), torch.exp(torch.tensor(eps / gamma, dtype=D.dtype))
+    return ((w[..., None] * colors[:, None, None, :]).sum(0) + w_b * background) / (w.sum(0) + w_b)[..., None]
+
+
+def blend_with(bg_term=True, bg_one=False, sign=1.0, use_D=True, use_z=True, bg_in_max=True):
+    def soft_blend(D, z, colors, background, gamma, eps):
+        log_w = (torch.log(D) if use_D else torch.zeros_like(D)) + (sign * z / gamma if use_z else 0.0)
+        log_b = torch.full_like(log_w[0], 0.0 if bg_one else eps / gamma)
+        top = torch.maximum(log_w.amax(0), log_b) if bg_in_max and bg_term else log_w.amax(0)
+        w, w_b = torch.exp(log_w - top), torch.exp(log_b - top)
+        num, den = (w[..., None] * colors[:, None, None, :]).sum(0), w.sum(0)
+        if bg_term:
+            num, den = num + w_b[..., None] * background, den + w_b
+        return num / den[..., None]
+    return soft_blend
+
+
+MISTAKES = [
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, ndc=False), 0, ["normalised device coordinates"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, square=False), 0, ["square the distance"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, flip=True), 0, ["swapped"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, segments=False), 0, ["infinite line"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, centre=0.0), 0, ["(j + 0.5, i + 0.5)"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, winding=1), 1, ["one winding"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, guard=False), 2, ["zero-length edge"]),
+    ("8.1", lambda t, h, w, s: coverage(t, h, w, s).T, 0, ["shape (12, 20) expected"]),
+    ("8.1", lambda t, h, w, s: coverage(t.double(), h, w, s), 2, ["keep the input's dtype"]),
+    ("8.2", lambda D: 1 - torch.prod(1 - D, 0), 2, ["loses faint coverage", "log1p"]),
+    ("8.2", lambda D: 1 - torch.exp(torch.log(1 - D).sum(0)), 2, ["loses faint coverage"]),
+    ("8.2", lambda D: torch.prod(1 - D, 0), 0, ["*no* face covers the pixel"]),
+    ("8.2", lambda D: D.sum(0).clamp(max=1), 1, ["not a probability"]),
+    ("8.2", lambda D: D.amax(0), 0, ["largest D_j"]),
+    ("8.3", naive_blend, 2, ["overflows", "log-weights"]),
+    ("8.3", blend_with(bg_in_max=False), 2, ["background's included"]),
+    ("8.3", blend_with(bg_term=False), 1, ["background is missing"]),
+    ("8.3", blend_with(bg_one=True), 1, ["exp(ε / γ), not 1"]),
+    ("8.3", blend_with(sign=-1.0), 0, ["*inverse* depth"]),
+    ("8.3", blend_with(use_D=False), 1, ["coverage is missing"]),
+    ("8.3", blend_with(use_z=False), 0, ["depth is missing"]),
+]
+
+
+def test_lecture_08_has_three_tasks_of_three_points_each():
+    assert [(t.id, t.name, t.points) for t in tasks_for_lecture(8)] == [
+        ("8.1", "soft_coverage", 3), ("8.2", "soft_silhouette", 3), ("8.3", "soft_blend", 3)]
+    assert {task for task, *_ in MISTAKES} == set(REFERENCES)
+
+
+@pytest.mark.parametrize("task_id", sorted(REFERENCES))
+def test_the_reference_scores_full_marks(task_id):
+    result = run_check(task_id, REFERENCES[task_id], allow_reference=True)
+    assert (result.points, result.message) == (TASKS[task_id].points, "")
+
+
+@pytest.mark.parametrize("task_id", sorted(SOLUTIONS))
+def test_a_students_solution_scores_full_marks(task_id):
+    result = run_check(task_id, SOLUTIONS[task_id])
+    assert (result.points, result.message) == (TASKS[task_id].points, "")
+
+
+@pytest.mark.parametrize("task_id, impl, points, words", MISTAKES, ids=[f"{m[0]}-{m[3][0][:30]}" for m in MISTAKES])
+def test_a_typical_mistake_loses_points_with_a_useful_message(task_id, impl, points, words):
+    result = run_check(task_id, impl, allow_reference=True)
+    assert result.points == points, result.message
+    for word in words:
+        assert word in result.message, result.message
+    assert "\n" not in result.message
+
+
+def one_triangle_scene():
+    """A screen-aligned orthographic camera (pixel = world x, y) and triangles parallel to the image."""
+    camera = Camera(torch.eye(3, dtype=torch.float64), torch.eye(3, dtype=torch.float64),
+                    torch.zeros(3, dtype=torch.float64), width=20, height=14, near=0.0, far=10.0, orthographic=True)
+    tris = torch.tensor([[[3.2, 2.1], [16.4, 5.3], [6.8, 12.2]], [[9.5, 1.0], [18.0, 9.0], [12.0, 13.0]]],
+                        dtype=torch.float64)
+    return camera, tris
+
+
+@pytest.mark.parametrize("sigma", [1e-2, 1e-3])
+def test_the_coverage_and_silhouette_references_agree_with_soft_rasterize(sigma):
+    camera, tris = one_triangle_scene()
+    depth = torch.tensor([[2.0] * 3, [4.0] * 3], dtype=torch.float64)
+    verts = torch.cat([tris, depth[..., None]], -1).reshape(-1, 3)
+    mesh = Mesh(verts, torch.arange(6).view(2, 3))
+    one = Mesh(verts[:3], torch.arange(3).view(1, 3))
+    thr = 1e-12                                                            # soft_rasterize skips D < thr
+    image = soft.soft_rasterize(one, camera, sigma=sigma, threshold=thr, cull_backfaces=False)
+    D = torch.stack([soft_coverage_reference(t, 14, 20, sigma) for t in tris])
+    assert torch.allclose(image, D[0], atol=2 * thr, rtol=1e-12)
+    image = soft.soft_rasterize(mesh, camera, sigma=sigma, threshold=thr, cull_backfaces=False)
+    assert torch.allclose(image, soft_silhouette_reference(D), atol=4 * thr, rtol=1e-12)
+    assert 0.2 < float(image.mean()) < 0.8
+
+
+@pytest.mark.parametrize("gamma", [1e-1, 1e-4])
+def test_the_blend_reference_agrees_with_soft_rasterize(gamma):
+    camera, tris = one_triangle_scene()
+    depth = torch.tensor([[2.0] * 3, [4.0] * 3], dtype=torch.float64)
+    verts = torch.cat([tris, depth[..., None]], -1).reshape(-1, 3)
+    mesh = Mesh(verts, torch.arange(6).view(2, 3))
+    colors = torch.tensor([[0.9, 0.2, 0.1], [0.1, 0.3, 0.8]], dtype=torch.float64)
+    bg = torch.tensor([1.0, 1.0, 0.5], dtype=torch.float64)
+    sigma, eps, thr = 1e-2, 1e-3, 1e-12
+    image = soft.soft_rasterize(mesh, camera, mode="color", sigma=sigma, gamma=gamma, face_colors=colors,
+                                background=bg, threshold=thr, eps=eps, cull_backfaces=False)
+    D = torch.stack([soft_coverage_reference(t, 14, 20, sigma) for t in tris])
+    z = ((camera.far - depth[:, :1, None]) / (camera.far - camera.near)).expand(2, 14, 20)   # orthographic
+    expected = soft_blend_reference(D, z, colors, bg, gamma, eps)
+    assert torch.allclose(image, expected, atol=1e-9, rtol=1e-9)
+
+
+CALLING_THE_PACKAGE = {
+    "8.1": lambda tri, h, w, s: soft.soft_rasterize(None, None, sigma=s),
+    "8.2": lambda D: soft.soft_rasterize(D, None),
+}
+
+
+@pytest.mark.parametrize("task_id", sorted(CALLING_THE_PACKAGE))
+def test_calling_the_reference_scores_zero(task_id):
+    result = run_check(task_id, CALLING_THE_PACKAGE[task_id])
+    assert result.points == 0 and "the package function this task re-implements" in result.message
+
+
+def blend_via_grading(D, z, colors, background, gamma, eps):
+    from course.grading import lecture08
+    return lecture08.soft_blend_reference(D, z, colors, background, gamma, eps)
+
+
+def test_calling_the_grading_reference_scores_zero():
+    result = run_check("8.3", blend_via_grading)
+    assert result.points == 0
+    assert result.message.startswith("soft_blend calls course.grading.lecture08.soft_blend_reference")
