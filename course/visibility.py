@@ -58,7 +58,7 @@ from .camera import Camera
 from .antialias import _crossing_segments, _intersecting_faces
 from .coverage import _region_chunks, exact_coverage
 from .raster import _camera_space, _check_inputs, _screen_triangles
-from .scan import EMPTY_KEY, _depth_keys, _faces_of, _plane, _sample_inside, pixel_triangle_pairs
+from .scan import EMPTY_KEY, _depth_keys, _faces_of, _plane, pixel_triangle_pairs
 from .soft import _screen_faces, nmr_rasterize, soft_rasterize
 from .tensors import as_tensor
 
@@ -96,6 +96,7 @@ class _Problem:
                 raise ValueError(f"{name} contains NaN or inf")
         self.faces, self.camera0 = faces, camera
         self.weights, self.background = w.to(self.dtype), bg.to(self.dtype)
+        self.weld = _weld(verts)                                            # (V,) one id per position
         self.params = {"verts": verts.detach().to(self.dtype), "R": camera.R.detach().to(self.dtype),
                        "t": camera.t.detach().to(self.dtype), "focal": camera.K[0, 0].detach().to(self.dtype),
                        "colors": c.detach().to(self.dtype)}
@@ -231,12 +232,13 @@ def _edges(prob, p) -> "_Edges":
     """Every face's edges on screen (differentiable endpoints, the normal out of the face, the welded vertex
     ids of the endpoints, -1 for points the near-plane clip made), then the faces' intersection lines."""
     mesh, cam = prob.mesh(p), prob.camera(p)
-    xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, False)      # (T, 3, 2), (T,)
+    weld = prob.weld
+    cull = _back_faces_hidden(prob, weld)                                   # a closed mesh seen from outside
+    xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, cull)       # (T, 3, 2), (T,)
     T = xy.shape[0]
     ids = torch.full((T, 3), -1, dtype=torch.int64, device=xy.device)
     # the faces that were not clipped come first, in order, with their own corners
     whole = _whole_count(face)
-    weld = _weld(prob.params["verts"])
     ids[:whole] = weld[prob.faces[face[:whole]]]
     a, b, c = xy, xy.roll(-1, 1), xy.roll(-2, 1)                            # edge k: corner k → k+1
     va, vb = ids, ids.roll(-1, 1)
@@ -252,7 +254,36 @@ def _edges(prob, p) -> "_Edges":
     flat = lambda x: x.reshape(T * 3, *x.shape[2:]).index_select(0, sel)
     edges = _Edges(flat(a), flat(b), flat(n), face[:, None].expand(T, 3).reshape(-1).index_select(0, sel),
                    torch.stack([flat(va), flat(vb)], 1), None)
-    return _with_crossings(edges, prob, p, weld)
+    edges = _with_crossings(_merge_twins(edges), prob, p, weld)
+    edges.culled = cull
+    return edges
+
+
+def _merge_twins(edges):
+    """An edge two faces share appears twice; keep one copy and remember the other face (``twin``, -1 for
+    none) and whether its outward normal is the same (a fold: both faces on one side) or the opposite. The
+    same two visibility samples then serve both faces."""
+    vid = edges.vid
+    E = vid.shape[0]
+    twin = torch.full((E,), -1, dtype=torch.int64, device=vid.device)
+    fold = torch.zeros(E, dtype=torch.bool, device=vid.device)
+    ok = (vid >= 0).all(1).nonzero().squeeze(1)
+    V = int(vid.max()) + 1 if vid.numel() else 0
+    key = torch.minimum(vid[ok, 0], vid[ok, 1]) * V + torch.maximum(vid[ok, 0], vid[ok, 1])
+    key, order = torch.sort(key, stable=True)
+    ok = ok[order]
+    _, counts = torch.unique_consecutive(key, return_counts=True)
+    first = torch.cumsum(counts, 0) - counts
+    pairs = first[counts == 2]                                              # exactly two faces share it
+    keep_e, drop_e = ok[pairs], ok[pairs + 1]
+    twin[keep_e] = edges.face[drop_e]
+    fold[keep_e] = (edges.n[keep_e] * edges.n[drop_e]).sum(1) > 0
+    alive = torch.ones(E, dtype=torch.bool, device=vid.device)
+    alive[drop_e] = False
+    idx = alive.nonzero().squeeze(1)
+    merged = _Edges(edges.a[idx], edges.b[idx], edges.n[idx], edges.face[idx], edges.vid[idx], None)
+    merged.twin, merged.fold = twin[idx], fold[idx]
+    return merged
 
 
 class _Edges:
@@ -264,6 +295,8 @@ class _Edges:
     def __init__(self, a, b, n, face, vid, other):
         self.a, self.b, self.n, self.face, self.vid, self.other = a, b, n, face, vid, other
         self.n_edges = a.shape[0] if other is None else a.shape[0] - other.shape[0]
+        self.twin = torch.full_like(face, -1)                               # the face sharing the edge, if any
+        self.fold = torch.zeros_like(face, dtype=torch.bool)                # ... on the same side of it
 
 
 def _planes(verts_cam, faces, K, orthographic):
@@ -306,9 +339,47 @@ def _with_crossings(edges, prob, p, weld):
         n = -grad / grad.norm(dim=1, keepdim=True).clamp_min(1e-300)        # out of f's region
     dtype = edges.a.dtype
     none = torch.full((pair.numel(), 2), -1, dtype=torch.int64, device=pair.device)
-    return _Edges(torch.cat([edges.a, xy[:, 0].to(dtype)]), torch.cat([edges.b, xy[:, 1].to(dtype)]),
-                  torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, fa]), torch.cat([edges.vid, none]),
-                  ga)
+    out = _Edges(torch.cat([edges.a, xy[:, 0].to(dtype)]), torch.cat([edges.b, xy[:, 1].to(dtype)]),
+                 torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, fa]), torch.cat([edges.vid, none]), ga)
+    out.twin = torch.cat([edges.twin, torch.full_like(fa, -1)])
+    out.fold = torch.cat([edges.fold, torch.zeros_like(fa, dtype=torch.bool)])
+    return out
+
+
+def _back_faces_hidden(prob, weld) -> bool:
+    """Can no back face be visible? True when the mesh is closed and consistently oriented (every welded edge
+    a → b has exactly one twin b → a), each of its connected pieces encloses a positive volume (outward
+    normals, front faces counter-clockwise), and every vertex lies beyond the near plane: the camera centre
+    (z = 0) is then outside the convex hull, so outside every piece, and a ray enters a piece through a front
+    face before it can reach a back one. The back faces' edges can then be skipped. A check, never an
+    assumption: anything else keeps every face."""
+    faces = weld[prob.faces]                                                # (F, 3) welded
+    if faces.numel() == 0:
+        return False
+    V = int(weld.max()) + 1
+    a, b = faces.reshape(-1), faces.roll(-1, 1).reshape(-1)
+    sorted_key, counts = torch.unique(a * V + b, return_counts=True)
+    if (counts != 1).any() or (a == b).any():
+        return False
+    twin = b * V + a
+    pos = torch.searchsorted(sorted_key, twin).clamp(max=sorted_key.numel() - 1)
+    if not torch.equal(sorted_key[pos], twin):
+        return False
+    cam = prob.camera0
+    verts = prob.params["verts"].double()
+    if (cam.to_camera(verts.to(cam.dtype)).double()[:, 2] <= cam.near).any():
+        return False
+    label = torch.arange(V, device=faces.device)                            # connected pieces: min label,
+    for _ in range(V):                                                      # spread and jumped to a fixpoint
+        new = label.scatter_reduce(0, a, label[b], reduce="amin").scatter_reduce(0, b, label[a], reduce="amin")
+        new = new[new]
+        if torch.equal(new, label):
+            break
+        label = new
+    v = verts[prob.faces]                                                   # signed volume of each piece
+    vol = (v[:, 0] * torch.linalg.cross(v[:, 1], v[:, 2])).sum(1) / 6
+    piece = torch.unique(label[faces[:, 0]], return_inverse=True)[1]
+    return bool((torch.zeros(int(piece.max()) + 1, dtype=vol.dtype).index_add(0, piece, vol) > 0).all())
 
 
 def _whole_count(face):
@@ -366,16 +437,21 @@ def _split_at_crossings(a, b, s0, s1, e, pixel):
     i = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), size)   # every (i, j) pair
     j = start[i] + (torch.arange(i.numel(), device=pixel.device)
                     - torch.repeat_interleave(torch.cumsum(size, 0) - size, size))
-    i, j = i[e[i] != e[j]], j[e[i] != e[j]]
-    ai, di = a[e[i]], b[e[i]] - a[e[i]]
-    aj, dj = a[e[j]], b[e[j]] - a[e[j]]
-    den = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
-    r = aj - ai
+    ei, ej = e.index_select(0, i), e.index_select(0, j)
+    other = (ei != ej).nonzero().squeeze(1)
+    i, j, ei, ej = i[other], j[other], ei[other], ej[other]
+    ax, ay = a[:, 0].contiguous(), a[:, 1].contiguous()                     # columns: quick gathers
+    dx, dy = (b[:, 0] - a[:, 0]).contiguous(), (b[:, 1] - a[:, 1]).contiguous()
+    dix, diy, djx, djy = dx.index_select(0, ei), dy.index_select(0, ei), dx.index_select(0, ej), dy.index_select(0, ej)
+    rx = ax.index_select(0, ej) - ax.index_select(0, ei)
+    ry = ay.index_select(0, ej) - ay.index_select(0, ei)
+    den = dix * djy - diy * djx
     ok = den != 0
     safe = torch.where(ok, den, torch.ones_like(den))
-    s = (r[:, 0] * dj[:, 1] - r[:, 1] * dj[:, 0]) / safe                   # along i
-    u = (r[:, 0] * di[:, 1] - r[:, 1] * di[:, 0]) / safe                   # along j
-    cut = ok & (s > s0[i]) & (s < s1[i]) & (u >= s0[j]) & (u <= s1[j])
+    s = (rx * djy - ry * djx) / safe                                        # along i
+    u = (rx * diy - ry * dix) / safe                                        # along j
+    cut = ok & (s > s0.index_select(0, i)) & (s < s1.index_select(0, i)) & (u >= s0.index_select(0, j)) & \
+        (u <= s1.index_select(0, j))
     piece = torch.cat([torch.arange(pixel.numel(), device=pixel.device)] * 2 + [i[cut]])
     t = torch.cat([s0, s1, s[cut]])
     order = torch.argsort(piece.double() * 4 + (t - s0[piece]) / (s1[piece] - s0[piece]).clamp_min(1e-300))
@@ -386,21 +462,22 @@ def _split_at_crossings(a, b, s0, s1, e, pixel):
     return lo[keep], hi[keep], e[owner[keep]], pixel[owner[keep]]
 
 
-def _visible_at(mesh, camera, pts, budget: int = 1 << 21):
+def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1 << 21):
     """The face the z-buffer shows at screen points (N, 2), -1 for background or outside the image: the
     sample z-buffer of ``rasterize(samples=...)`` (same coverage rule, depth keys and far plane), asked at
-    arbitrary points. Each point is tested against the triangles touching its pixel."""
+    arbitrary points. Each point is tested against the triangles touching its pixel. cull_backfaces: leave
+    the back faces out, when they are known never to be visible (``_back_faces_hidden``)."""
     W, H = camera.width, camera.height
     col, row = torch.floor(pts[:, 0]), torch.floor(pts[:, 1])
     ok = (col >= 0) & (col < W) & (row >= 0) & (row < H)
     out = torch.full((pts.shape[0],), -1, dtype=torch.int64, device=pts.device)
     idx = ok.nonzero().squeeze(1)
     with torch.no_grad():
-        st = _screen_triangles(_camera_space(mesh.verts, camera), mesh.faces, camera, False, reach=0.0)
+        st = _screen_triangles(_camera_space(mesh.verts, camera), mesh.faces, camera, cull_backfaces, reach=0.0)
         if idx.numel() == 0 or st.face.numel() == 0:
             return out
         pix = (row * W + col)[idx].long()
-        p = pts[idx].double()
+        px_all, py_all = pts[idx, 0].double().contiguous(), pts[idx, 1].double().contiguous()
         order = torch.argsort(pix)
         sorted_pix = pix[order]
         mask = torch.zeros(H * W, dtype=torch.bool, device=pts.device)
@@ -409,6 +486,8 @@ def _visible_at(mesh, camera, pts, budget: int = 1 << 21):
         first = torch.searchsorted(sorted_pix, pair_pix)
         count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
         q0, qx, qy = _plane(st)
+        X = [st.xy[:, k, 0].contiguous() for k in range(3)]                 # corner columns: quick gathers
+        Y = [st.xy[:, k, 1].contiguous() for k in range(3)]
         zbuf = torch.full((idx.numel(),), EMPTY_KEY, dtype=torch.int64, device=pts.device)
         ends = torch.cumsum(count, 0)
         lo = 0
@@ -418,11 +497,18 @@ def _visible_at(mesh, camera, pts, budget: int = 1 << 21):
             pair = torch.repeat_interleave(torch.arange(lo, hi, device=pts.device), c)
             k = order[first[pair] + (torch.arange(pair.numel(), device=pts.device)
                                      - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]
-            t = tri[pair]
-            x = p[k]
-            inside = _sample_inside(st.xy[t], x[:, None, :])[:, 0]
-            k, t, x = k[inside], t[inside], x[inside]
-            q = q0[t] + qx[t] * x[:, 0] + qy[t] * x[:, 1]
+            t = tri.index_select(0, pair)
+            px, py = px_all.index_select(0, k), py_all.index_select(0, k)
+            inside = torch.ones_like(px, dtype=torch.bool)
+            for c in range(3):                                              # scan._sample_inside, by columns
+                ax, ay = X[c].index_select(0, t), Y[c].index_select(0, t)
+                bx, by = X[(c + 1) % 3].index_select(0, t), Y[(c + 1) % 3].index_select(0, t)
+                e = (ax - px) * (by - py) - (ay - py) * (bx - px)          # scan.edge_function
+                top_left = (by - ay < 0) | ((by == ay) & (bx > ax))         # scan._is_top_left
+                inside &= (e > 0) | ((e == 0) & top_left)
+            sel = inside.nonzero().squeeze(1)
+            k, t, px, py = k[sel], t[sel], px[sel], py[sel]
+            q = q0.index_select(0, t) + qx.index_select(0, t) * px + qy.index_select(0, t) * py
             depth = q.float() if camera.orthographic else q.float().reciprocal_()
             keep = depth <= camera.far
             keys = _depth_keys(depth[keep], st.face[t][keep], positive=not camera.orthographic)
@@ -486,19 +572,27 @@ def boundary_gradient(prob: _Problem, names, *, order=None, samples=None, genera
     mesh, cam = prob.mesh(p), prob.camera(p)
     with torch.no_grad():
         x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
-        inside = _visible_at(mesh, cam, x - OFFSET * n[e])
-        outside = _visible_at(mesh, cam, x + OFFSET * n[e])
-        f = face[e]
-        on = inside == f                                                    # f shows just inside: a boundary
+        inside, outside = _visible_at(mesh, cam, torch.cat([x - OFFSET * n[e], x + OFFSET * n[e]]),
+                                      edges.culled).chunk(2)
         colors = p["colors"].detach()
-        c_out = torch.where((outside >= 0)[:, None], colors[outside.clamp(min=0)], prob.background)
-        jump = colors[f] - c_out                                            # (N, 3)
-        # an edge the outside face shares (same welded endpoints) is found from both faces: half each
-        other = _weld(prob.params["verts"])[prob.faces[outside.clamp(min=0)]]   # (N, 3)
-        shared = (outside >= 0) & (vid[e] >= 0).all(1) & (other == vid[e][:, :1]).any(1) & \
-                 (other == vid[e][:, 1:]).any(1)
-        value = (prob.weights.reshape(-1, 3)[pix] * jump).sum(1) * weight * torch.where(shared, 0.5, 1.0)
-        value = torch.where(on, value, torch.zeros_like(value))
+        w = prob.weights.reshape(-1, 3)[pix]
+        ends = vid[e]
+
+        def term(owner, inner, outer):
+            """(N,) w · (c_owner - c_outer), where the owner shows on its inner side, halved when the face
+            beyond also has this edge (it finds the same boundary from its side)."""
+            c_out = torch.where((outer >= 0)[:, None], colors[outer.clamp(min=0)], prob.background)
+            beyond = prob.weld[prob.faces[outer.clamp(min=0)]]              # (N, 3)
+            shared = (outer >= 0) & (ends >= 0).all(1) & (beyond == ends[:, :1]).any(1) & \
+                (beyond == ends[:, 1:]).any(1)
+            t = (w * (colors[owner.clamp(min=0)] - c_out)).sum(1) * torch.where(shared, 0.5, 1.0)
+            return torch.where((owner >= 0) & (inner == owner), t, torch.zeros_like(t))
+
+        value = term(face[e], inside, outside)                              # the edge's face
+        twin, fold = edges.twin[e], edges.fold[e]                           # the face sharing it: same samples,
+        value = value + torch.where(fold, term(twin, inside, outside),      # its normal along n (a fold) or
+                                    -term(twin, outside, inside))           # against it
+        value = value * weight
     keep = (value != 0).nonzero().squeeze(1)
     e, s, value = e[keep], s[keep], value[keep]
     # face edges: the point moves with the edge's ends, d/dπ (n · x) = v_n

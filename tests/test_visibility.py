@@ -53,6 +53,28 @@ def test_reynolds_equals_the_exact_gradient(kind, ortho):
     assert rel(two, exact[0]) < 1e-12
 
 
+def test_back_faces_are_skipped_only_when_they_cannot_show():
+    """A closed sphere seen from outside: back faces are skipped (they never show). Turned inside out, or with
+    the camera inside, or opened up, the back faces show and are kept; Reynolds equals exact every time."""
+    from course.visibility import _back_faces_hidden, _Problem
+    sphere = icosphere(1, dtype=torch.float64)
+    inverted = Mesh(sphere.verts, sphere.faces[:, [0, 2, 1]])
+    opened = Mesh(sphere.verts, sphere.faces[1:])
+    outside = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), fov_y=50.0, width=24, height=20, dtype=torch.float64)
+    inside = Camera.look_at((0.1, 0.05, 0.2), (0.5, 0.3, -1.0), fov_y=70.0, width=24, height=20, near=0.05,
+                            dtype=torch.float64)
+    g = torch.Generator().manual_seed(3)
+    for mesh, cam, hidden in ((sphere, outside, True), (inverted, outside, False), (opened, outside, False),
+                              (sphere, inside, False)):
+        colors = torch.rand(mesh.faces.shape[0], 3, generator=g, dtype=torch.float64)
+        weights = torch.randn(20, 24, 3, generator=g, dtype=torch.float64)
+        prob = _Problem(mesh, cam, colors, weights, (0.0, 0.0, 0.0), "flat")
+        assert _back_faces_hidden(prob, prob.weld) == hidden
+        exact = image_gradient(mesh, cam, colors, weights, method="exact")
+        reyn = image_gradient(mesh, cam, colors, weights, method="reynolds")
+        assert exact.abs().sum() > 0 and rel(reyn, exact) < 1e-12, rel(reyn, exact)
+
+
 def test_finite_differences_match_exact_and_their_step_trade_off():
     """Central differences: truncation error O(h²) for large h, round-off O(eps / h) for small h; in float64
     h = 1e-6 lands between the two (error ~1e-7 here), in float32 no step gets close."""
