@@ -42,8 +42,11 @@ point per piece decides. Lines where two faces pass through each other (``antial
 are boundaries too: there the line n_f = n_g (the faces' nearness planes on screen) moves at
 ``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The far plane is not a boundary here (faces are taken whole up to it).
 
-Status (lecture 09 is still to come): only ``model="flat"``; the affine-colour model, the reparameterization
-view and the ``bench gradients`` command are next.
+Two image models (``model=``): ``"flat"``, one colour per face (``coverage.exact_coverage``: everything is
+boundary), and ``"affine"``, vertex colours interpolated affinely on screen (``coverage_affine``: each
+piece's area times the colour at its centroid). With affine colours the interior term is autograd under
+fixed pieces (``_interior``), and the boundary integrand is the product of two linear functions along a
+piece: exact with ``order=2``, not with 1.
 """
 from __future__ import annotations
 
@@ -55,9 +58,10 @@ import torch
 from .camera import Camera
 from .antialias import _crossing_segments, _intersecting_faces
 from .coverage import _region_chunks, exact_coverage
-from .raster import _camera_space, _check_inputs, _screen_triangles
+from .coverage_affine import _Field, exact_affine_coverage, polygon_centroids
+from .raster import _camera_space, _check_inputs, _screen_triangles, interpolate, rasterize
 from .scan import _plane, pixel_triangle_pairs
-from .soft import _screen_faces, nmr_rasterize, soft_rasterize
+from .soft import _screen_faces, nmr_image, nmr_rasterize, soft_rasterize
 from .tensors import as_tensor
 
 __all__ = ["image_gradient", "METHODS", "PARAMETERS", "boundary_points", "boundary_gradient"]
@@ -74,14 +78,17 @@ class _Problem:
 
     def __init__(self, mesh, camera, colors, weights, background, model, dtype=None):
         verts, faces = _check_inputs(mesh, camera)
-        if model not in ("flat",):
-            raise ValueError(f"model must be 'flat' (flat-coloured faces), got {model!r}")
+        if model not in ("flat", "affine"):
+            raise ValueError(f"model must be 'flat' (face colours) or 'affine' (vertex colours interpolated "
+                             f"affinely on screen), got {model!r}")
+        self.model = model
         self.dtype = dtype or torch.promote_types(verts.dtype, camera.dtype)
         dev = verts.device
         c = as_tensor(colors, device=dev, name="colors")
-        if c.shape != (faces.shape[0], 3):
-            raise ValueError(f"colors must be (F, 3) face colours for model='flat', F = {faces.shape[0]}, "
-                             f"got {tuple(c.shape)}")
+        n, kind = (faces.shape[0], "F, 3) face") if model == "flat" else (verts.shape[0], "V, 3) vertex")
+        if c.shape != (n, 3):
+            raise ValueError(f"colors must be ({kind} colours for model={model!r}, {kind[0]} = {n}, got "
+                             f"{tuple(c.shape)}")
         w = as_tensor(weights, device=dev, name="weights")
         if w.shape != (camera.height, camera.width, 3):
             raise ValueError(f"weights must have shape (H, W, 3) = ({camera.height}, {camera.width}, 3), got "
@@ -136,12 +143,18 @@ def exact_gradient(prob: _Problem, names):
     cam, mesh = prob.camera(p), prob.mesh(p)
     w = prob.weights.reshape(-1, 3)
     colors = p["colors"] - prob.background                                   # image = bg + Σ area (c - bg)
+    field = _Field(mesh.verts, mesh.faces, cam) if prob.model == "affine" else None
     leaves = [p[n] for n in names]
     total = [torch.zeros_like(x) for x in leaves]
     for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype):
         if regions.pixel.numel() == 0:
             continue
-        part = (w[regions.pixel] * regions.area[:, None] * colors[regions.face]).sum()
+        if field is None:
+            c = colors[regions.face]
+        else:                                                               # the colour at the centroid
+            field.check(torch.unique(regions.face), "image_gradient")
+            c = field.colors(regions.face, regions.pixel, polygon_centroids(regions.verts, regions.count), colors)
+        part = (w[regions.pixel] * regions.area[:, None] * c).sum()
         if not part.requires_grad:
             continue
         g = torch.autograd.grad(part, leaves, retain_graph=True, allow_unused=True)
@@ -156,7 +169,8 @@ def _loss(prob, p, crop=None):
     if crop is not None:
         x0, y0, W, H = crop
         w = w[y0:y0 + H, x0:x0 + W]
-    image = exact_coverage(prob.mesh(p), prob.camera(p, crop), p["colors"], prob.background)
+    image = (exact_coverage if prob.model == "flat" else exact_affine_coverage)(
+        prob.mesh(p), prob.camera(p, crop), p["colors"], prob.background)
     return (w * image).sum()
 
 
@@ -200,6 +214,8 @@ def fd_gradient(prob: _Problem, names, step=1e-4, scheme="central", vertices=Non
             g = torch.full_like(x, math.nan) if name == "verts" and vertices is not None else torch.zeros_like(x)
             if name == "verts":
                 ids = range(x.shape[0]) if vertices is None else [int(i) for i in vertices]
+                if any(not 0 <= i < x.shape[0] for i in ids):
+                    raise ValueError(f"vertices must be indices in [0, {x.shape[0]}), got {list(vertices)}")
                 entries = [(i, a) for i in ids for a in range(3)]
             else:
                 entries = list(np.ndindex(*x.shape)) if x.dim() else [()]
@@ -584,15 +600,20 @@ def boundary_gradient(prob: _Problem, names, *, order=None, samples=None, genera
         colors = p["colors"].detach()
         w = prob.weights.reshape(-1, 3)[pix]
         ends = vid[e]
+        if prob.model == "affine":                                          # each face's colour field at x
+            field = _Field(prob.params["verts"], prob.faces, prob.camera(prob.params))
+            color_of = lambda f: field.colors(f.clamp(min=0), torch.zeros_like(f), x, colors)
+        else:
+            color_of = lambda f: colors[f.clamp(min=0)]
 
         def term(owner, inner, outer):
             """(N,) w · (c_owner - c_outer), where the owner shows on its inner side, halved when the face
             beyond also has this edge (it finds the same boundary from its side)."""
-            c_out = torch.where((outer >= 0)[:, None], colors[outer.clamp(min=0)], prob.background)
+            c_out = torch.where((outer >= 0)[:, None], color_of(outer), prob.background)
             beyond = prob.weld[prob.faces[outer.clamp(min=0)]]              # (N, 3)
             shared = (outer >= 0) & (ends >= 0).all(1) & (beyond == ends[:, :1]).any(1) & \
                 (beyond == ends[:, 1:]).any(1)
-            t = (w * (colors[owner.clamp(min=0)] - c_out)).sum(1) * torch.where(shared, 0.5, 1.0)
+            t = (w * (color_of(owner) - c_out)).sum(1) * torch.where(shared, 0.5, 1.0)
             return torch.where((owner >= 0) & (inner == owner), t, torch.zeros_like(t))
 
         value = term(face[e], inside, outside)                              # the edge's face
@@ -614,10 +635,29 @@ def boundary_gradient(prob: _Problem, names, *, order=None, samples=None, genera
         x = (a[k] + s[~m, None] * (b[k] - a[k])).detach()
         size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
         surrogate = surrogate + (value[~m] * (L[:, 0] * x[:, 0] + L[:, 1] * x[:, 1] + L[:, 2]) / size).sum()
+    if prob.model == "affine":                                          # the interior term: the colour field
+        surrogate = surrogate + _interior(prob, p)                          # moves under fixed pieces
     if not surrogate.requires_grad:
         return tuple(torch.zeros_like(x) for x in leaves)
     g = torch.autograd.grad(surrogate, leaves, allow_unused=True)
     return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+
+
+def _interior(prob, p):
+    """``Σ w · area · c(centroid; π)`` over the visible pieces, with the pieces' areas and centroids held
+    fixed: its derivative is ``∫ ∂c/∂π`` over each piece, exact since ∂c/∂π is affine on screen too."""
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    with torch.no_grad():
+        pieces = list(_region_chunks(mesh.verts.detach(), mesh.faces, prob.camera(prob.params), prob.dtype))
+    field = _Field(mesh.verts, mesh.faces, cam)
+    w = prob.weights.reshape(-1, 3)
+    total = 0.0
+    for r in pieces:
+        if r.pixel.numel():
+            field.check(torch.unique(r.face), "image_gradient")
+            c = field.colors(r.face, r.pixel, polygon_centroids(r.verts, r.count), p["colors"])
+            total = total + (w[r.pixel] * r.area[:, None] * c).sum()
+    return total
 
 
 # ------------------------------------------------------------------------------- NMR and soft (lecture 08)
@@ -671,18 +711,25 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
             raise TypeError(f"unexpected options for {method}: {', '.join(options)}")
         by_name = dict(zip(geo, g))
         if "colors" in names:                                               # linear: the exact derivative
-            by_name["colors"] = exact_gradient(prob, ("colors",))[0]
+            by_name["colors"] = exact_gradient(prob, ("colors",))[0]        # (the interior term, exactly)
         grads = tuple(by_name[n] for n in names)
     elif method == "nmr":
         reach = options.pop("reach", None)
-        grads = _other_image_gradient(prob, names, lambda m, c, col, bg: nmr_rasterize(
-            m, c, face_colors=col, background=bg, cull_backfaces=False, reach=reach))
+
+        def nmr(m, c, col, bg):
+            if prob.model == "flat":
+                return nmr_rasterize(m, c, face_colors=col, background=bg, cull_backfaces=False, reach=reach)
+            frags = rasterize(m, c)                                         # vertex colours, then NMR's gradient
+            image = torch.where(frags.mask[..., None], interpolate(col, frags, m.faces), bg)
+            return nmr_image(image, m, c, frags.face_id, background=bg, cull_backfaces=False, reach=reach)
+        grads = _other_image_gradient(prob, names, nmr)
     else:
         sigma, gamma = options.pop("sigma", 1e-4), options.pop("gamma", 1e-4)
         threshold = options.pop("threshold", 1e-4)
+        key = "face_colors" if prob.model == "flat" else "vertex_colors"
         grads = _other_image_gradient(prob, names, lambda m, c, col, bg: soft_rasterize(
-            m, c, mode="color", face_colors=col, background=bg, sigma=sigma, gamma=gamma, threshold=threshold,
-            cull_backfaces=False))
+            m, c, mode="color", background=bg, sigma=sigma, gamma=gamma, threshold=threshold,
+            cull_backfaces=False, **{key: col}))
     if method in ("nmr", "soft") and options:
         raise TypeError(f"unexpected options for {method}: {', '.join(options)}")
     return grads[0] if wrt is None else grads

@@ -53,6 +53,26 @@ def test_reynolds_equals_the_exact_gradient(kind, ortho):
     assert rel(two, exact[0]) < 1e-12
 
 
+@pytest.mark.parametrize("ortho", [False, True])
+def test_affine_colours_need_two_points_per_piece(ortho):
+    """Vertex colours interpolated affinely on screen: the interior term (autograd under fixed pieces) plus the
+    boundary term, whose integrand (colour jump × normal speed) is a product of two linear functions along a
+    piece of edge: exact with 2 Gauss points, not with 1 (the midpoint rule misses the quadratic part)."""
+    mesh, cam, _, weights = problem("intersect", ortho)
+    colors = torch.rand(mesh.verts.shape[0], 3, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    exact = image_gradient(mesh, cam, colors, weights, method="exact", model="affine", wrt=ALL)
+    two = image_gradient(mesh, cam, colors, weights, method="reynolds", model="affine", order=2, wrt=ALL)
+    one = image_gradient(mesh, cam, colors, weights, method="reynolds", model="affine", order=1)
+    for name, x, y in zip(ALL, two, exact):
+        assert y.abs().sum() > 0 and rel(x, y) < 1e-12, (name, rel(x, y))
+    assert rel(one, exact[0]) > 1e-4
+    fd = image_gradient(mesh, cam, colors, weights, method="finite_differences", model="affine", step=1e-6,
+                        vertices=[3, 50, 300])
+    assert rel(fd[[3, 50, 300]], exact[0][[3, 50, 300]]) < 1e-6
+    es = image_gradient(mesh, cam, colors, weights, method="edge_sampling", model="affine", samples=4000)
+    assert torch.isfinite(es).all() and float((es * exact[0]).sum()) > 0
+
+
 def test_back_faces_are_skipped_only_when_they_cannot_show():
     """A closed sphere seen from outside: back faces are skipped (they never show). Turned inside out, or with
     the camera inside, or opened up, the back faces show and are kept; Reynolds equals exact every time."""
@@ -167,7 +187,11 @@ def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="weights"):
         image_gradient(mesh, cam, colors, weights[:-1], method="exact")
     with pytest.raises(ValueError, match="model"):
-        image_gradient(mesh, cam, colors, weights, method="exact", model="affine")
+        image_gradient(mesh, cam, colors, weights, method="exact", model="smooth")
+    with pytest.raises(ValueError, match="vertex"):
+        image_gradient(mesh, cam, colors, weights, method="exact", model="affine")     # (F, 3) given
+    with pytest.raises(ValueError, match="vertices"):
+        image_gradient(mesh, cam, colors, weights, method="finite_differences", vertices=[10**6])
     with pytest.raises(ValueError, match="NaN"):
         image_gradient(mesh, cam, colors * math.nan, weights, method="exact")
     with pytest.raises(ValueError, match="scheme"):
