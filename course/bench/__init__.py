@@ -16,6 +16,9 @@
   ray-traced shadows: time against error, a table and a Pareto plot.
 * ``soft`` (``course.bench.soft``): the hard rasterizer, NMR's approximate gradient and soft rasterization
   (σ, γ, threshold) on S4: forward and forward+backward time, image error to the exact box-filtered image.
+* ``gradients`` (``course.bench.gradients``): visibility gradients (finite differences, edge sampling,
+  Reynolds, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
+  error, a table and a Pareto plot.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -31,7 +34,7 @@ import json
 
 import torch
 
-from . import aa, precision, raster, raytrace, shadows, skips, soft
+from . import aa, gradients, precision, raster, raytrace, shadows, skips, soft
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -40,7 +43,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
-           "raytrace": raytrace, "shadows": shadows, "soft": soft}
+           "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients}
 
 
 def cli(argv) -> int:
