@@ -48,8 +48,9 @@ NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": 
          "5.1": "clip_polygon", "5.2": "halfplane_pixel_area", "5.3": "segment_pixels", "5.4": "supersample",
          "6.1": "light_space", "6.2": "biased_lit", "6.3": "pcf",
          "7.1": "ray_triangle", "7.2": "ray_aabb", "7.3": "shadow_ray",
-         "8.1": "soft_coverage", "8.2": "soft_silhouette", "8.3": "soft_blend"}
-LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-08: tests/test_grading_0N.py
+         "8.1": "soft_coverage", "8.2": "soft_silhouette", "8.3": "soft_blend",
+         "9.1": "central_difference", "9.2": "boundary_term", "9.3": "edge_sample"}
+LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-09: tests/test_grading_0N.py
 
 
 def rodrigues_dividing_by_theta(w):
