@@ -81,11 +81,14 @@ def test_pose_row_gradient_wrt_camera():
     assert rows[1]["rel"] < 1e-9
 
 
-def test_affine_scene_is_skipped_with_a_message_until_the_model_exists(capsys):
-    rows = gb.bench_gradients(["affine"], plot=None)
-    out = capsys.readouterr().out
-    if gb._model_missing("affine"):
-        assert rows == [] and "affine: skipped" in out
+def test_affine_scene_needs_order_2(capsys):
+    """Vertex colours affine on screen: Reynolds with 2 points per piece is exact, with 1 it is not."""
+    assert gb._model_missing("affine") is None
+    rows = gb.bench_gradients(["affine"], weights=["random"], repeat=1, samples=(100,), sigmas=(),
+                              steps={torch.float64: (1e-6,)}, fd_vertices=2, plot=None)
+    reyn = {r["param"]: r["rel"] for r in rows if r["method"] == "reynolds"}
+    assert reyn["order 2"] < 1e-10 < 1e-5 < reyn["order 1"]
+    assert "vertex colours" in capsys.readouterr().out
 
 
 def test_plot_pareto_on_synthetic_rows(tmp_path):
