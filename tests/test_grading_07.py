@@ -8,6 +8,7 @@ import torch
 
 from course import raytrace
 from course.grading import TASKS, run_check, tasks_for_lecture
+from grading_contract import contract
 from course.grading.lecture07 import EPS, _shadow_reference, _slab_reference
 
 
@@ -126,25 +127,8 @@ def test_lecture_07_has_three_tasks_of_three_points_each():
     assert {task for task, *_ in MISTAKES} == set(REFERENCES)
 
 
-@pytest.mark.parametrize("task_id", sorted(REFERENCES))
-def test_the_reference_scores_full_marks(task_id):
-    result = run_check(task_id, REFERENCES[task_id], allow_reference=True)
-    assert (result.points, result.message) == (TASKS[task_id].points, "")
-
-
-@pytest.mark.parametrize("task_id", sorted(SOLUTIONS))
-def test_a_students_solution_scores_full_marks(task_id):
-    result = run_check(task_id, SOLUTIONS[task_id])
-    assert (result.points, result.message) == (TASKS[task_id].points, "")
-
-
-@pytest.mark.parametrize("task_id, impl, points, words", MISTAKES, ids=[f"{m[0]}-{m[3][0][:30]}" for m in MISTAKES])
-def test_a_typical_mistake_loses_points_with_a_useful_message(task_id, impl, points, words):
-    result = run_check(task_id, impl, allow_reference=True)
-    assert result.points == points, result.message
-    for word in words:
-        assert word in result.message, result.message
-    assert "\n" not in result.message
+(test_the_reference_scores_full_marks, test_a_students_solution_scores_full_marks,
+ test_a_typical_mistake_loses_points_with_a_useful_message) = contract(REFERENCES, SOLUTIONS, MISTAKES)
 
 
 CALLING_THE_PACKAGE = {
