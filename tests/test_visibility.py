@@ -76,7 +76,8 @@ def test_affine_colours_need_two_points_per_piece(ortho):
 def test_back_faces_are_skipped_only_when_they_cannot_show():
     """A closed sphere seen from outside: back faces are skipped (they never show). Turned inside out, or with
     the camera inside, or opened up, the back faces show and are kept; Reynolds equals exact every time."""
-    from course.visibility import _back_faces_hidden, _Problem
+    from course.boundary import _back_faces_hidden
+    from course.visibility import _Problem
     sphere = icosphere(1, dtype=torch.float64)
     inverted = Mesh(sphere.verts, sphere.faces[:, [0, 2, 1]])
     opened = Mesh(sphere.verts, sphere.faces[1:])

@@ -36,7 +36,7 @@ from .registry import forbidden_call, task
 __all__ = ["central_difference_reference", "boundary_term_reference", "edge_sample_reference"]
 
 FORBIDDEN = [("course.visibility", "image_gradient"), ("course.visibility", "fd_gradient"),
-             ("course.visibility", "boundary_gradient"), ("course.visibility", "boundary_points"),
+             ("course.boundary", "boundary_gradient"), ("course.boundary", "boundary_points"),
              ("course.coverage", "halfplane_pixel_area"),
              ("course.grading.lecture09", "central_difference_reference"),
              ("course.grading.lecture09", "boundary_term_reference"),
@@ -242,7 +242,7 @@ def _edge_args(p0, p1, v0, v1, jump, col, row, dtype=torch.float64):
     return t(p0), t(p1), t(v0), t(v1), t(jump), col, row
 
 
-@task("9.2", "boundary_term", points=3, reference=("course.visibility", "boundary_gradient"))
+@task("9.2", "boundary_term", points=3, reference=("course.boundary", "boundary_gradient"))
 def _check_boundary_term(impl):
     forbidden = forbidden_call(impl, "boundary_term", FORBIDDEN)
     if forbidden:
@@ -352,7 +352,7 @@ def _sampling_rate(impl, args) -> str | None:
     return None
 
 
-@task("9.3", "edge_sample", points=3, reference=("course.visibility", "boundary_gradient"))
+@task("9.3", "edge_sample", points=3, reference=("course.boundary", "boundary_gradient"))
 def _check_edge_sample(impl):
     forbidden = forbidden_call(impl, "edge_sample", FORBIDDEN)
     if forbidden:

@@ -1,0 +1,454 @@
+"""The boundary term of visibility gradients: edges on screen, the pieces of them that bound what is visible,
+and the integrand there (lecture 09; ``course.visibility`` is the front door).
+
+Reynolds transport: the derivative of a pixel's integral gains a boundary integral, ``∫ (c_in - c_out) v_n ds``
+along the curves where the visible colour jumps. ``boundary_gradient`` evaluates it by Gauss-Legendre
+quadrature on every piece of edge inside a pixel (``order``, the "reynolds" method) or at random points on
+the edges (``samples``, "edge_sampling"), and lets autograd carry ``v_n`` back to the parameters through the
+edges' screen positions.
+
+Boundaries counted once. A point x on the edge of face f is a boundary of f's visible region when f is what
+the z-buffer shows just inside the edge; the region then grows at rate ``(c_f - c_out) v_n``. An edge two
+faces share is found from both (each sees the other outside): each counts half. A silhouette fold is found
+from the face in front only (the one behind is not visible inside its edge), an occluding edge from the
+occluder only, and an edge whose face is hidden on both sides adds nothing. Visibility along an edge changes
+only where another edge or an intersection line crosses it, so the pieces are cut there and one quadrature
+point per piece decides. Lines where two faces pass through each other (``antialias._intersecting_faces``)
+are boundaries too: there the line n_f = n_g (the faces' nearness planes on screen) moves at
+``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The far plane is not a boundary here (faces are taken whole up to it).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from .antialias import _crossing_segments, _intersecting_faces
+from .coverage import _region_chunks
+from .coverage_affine import _Field, polygon_centroids
+from .raster import _camera_space, _screen_triangles
+from .scan import _plane, pixel_triangle_pairs
+from .soft import _screen_faces
+
+__all__ = ["boundary_points", "boundary_gradient"]
+
+OFFSET = 1e-6            # pixels: how far beside an edge the z-buffer is asked what is visible
+
+
+def _edges(prob, p) -> "_Edges":
+    """Every face's edges on screen (differentiable endpoints, the normal out of the face, the welded vertex
+    ids of the endpoints, -1 for points the near-plane clip made), then the faces' intersection lines."""
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    weld = prob.weld
+    cull = _back_faces_hidden(prob, weld)                                   # a closed mesh seen from outside
+    xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, cull)       # (T, 3, 2), (T,)
+    T = xy.shape[0]
+    ids = torch.full((T, 3), -1, dtype=torch.int64, device=xy.device)
+    # the faces that were not clipped come first, in order, with their own corners
+    whole = _whole_count(face)
+    ids[:whole] = weld[prob.faces[face[:whole]]]
+    a, b, c = xy, xy.roll(-1, 1), xy.roll(-2, 1)                            # edge k: corner k → k+1
+    va, vb = ids, ids.roll(-1, 1)
+    d = (b - a).detach()
+    n = torch.stack([d[..., 1], -d[..., 0]], -1)
+    inward = ((c.detach() - a.detach()) * n).sum(-1) > 0
+    n = torch.where(inward[..., None], -n, n)
+    n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-300)
+    keep = (d.norm(dim=-1) > 0).reshape(-1)
+    area = (d[:, 0, 0] * (c - a).detach()[:, 0, 1] - d[:, 0, 1] * (c - a).detach()[:, 0, 0]).abs()
+    keep &= (area > 0)[:, None].expand(T, 3).reshape(-1)                   # a zero-area face bounds nothing
+    sel = keep.nonzero().squeeze(1)
+    flat = lambda x: x.reshape(T * 3, *x.shape[2:]).index_select(0, sel)
+    edges = _Edges(flat(a), flat(b), flat(n), face[:, None].expand(T, 3).reshape(-1).index_select(0, sel),
+                   torch.stack([flat(va), flat(vb)], 1), None)
+    edges = _with_crossings(_merge_twins(edges), prob, p, weld)
+    edges.culled = cull
+    return edges
+
+
+def _merge_twins(edges):
+    """An edge two faces share appears twice; keep one copy and remember the other face (``twin``, -1 for
+    none) and whether its outward normal is the same (a fold: both faces on one side) or the opposite. The
+    same two visibility samples then serve both faces."""
+    vid = edges.vid
+    E = vid.shape[0]
+    twin = torch.full((E,), -1, dtype=torch.int64, device=vid.device)
+    fold = torch.zeros(E, dtype=torch.bool, device=vid.device)
+    ok = (vid >= 0).all(1).nonzero().squeeze(1)
+    V = int(vid.max()) + 1 if vid.numel() else 0
+    key = torch.minimum(vid[ok, 0], vid[ok, 1]) * V + torch.maximum(vid[ok, 0], vid[ok, 1])
+    key, order = torch.sort(key, stable=True)
+    ok = ok[order]
+    _, counts = torch.unique_consecutive(key, return_counts=True)
+    first = torch.cumsum(counts, 0) - counts
+    pairs = first[counts == 2]                                              # exactly two faces share it
+    keep_e, drop_e = ok[pairs], ok[pairs + 1]
+    twin[keep_e] = edges.face[drop_e]
+    fold[keep_e] = (edges.n[keep_e] * edges.n[drop_e]).sum(1) > 0
+    alive = torch.ones(E, dtype=torch.bool, device=vid.device)
+    alive[drop_e] = False
+    idx = alive.nonzero().squeeze(1)
+    merged = _Edges(edges.a[idx], edges.b[idx], edges.n[idx], edges.face[idx], edges.vid[idx], None)
+    merged.twin, merged.fold = twin[idx], fold[idx]
+    return merged
+
+
+class _Edges:
+    """Curves along which the image may jump, as screen segments a → b (E, 2): the first ones are face edges
+    (differentiable endpoints), then the lines where two faces pass through each other (detached endpoints;
+    ``other`` (K,) the second face, the first being ``face``). n (E, 2): the unit normal pointing out of the
+    region of ``face``; vid (E, 2): welded vertex ids of a face edge's endpoints (-1: none)."""
+
+    def __init__(self, a, b, n, face, vid, other):
+        self.a, self.b, self.n, self.face, self.vid, self.other = a, b, n, face, vid, other
+        self.n_edges = a.shape[0] if other is None else a.shape[0] - other.shape[0]
+        self.twin = torch.full_like(face, -1)                               # the face sharing the edge, if any
+        self.fold = torch.zeros_like(face, dtype=torch.bool)                # ... on the same side of it
+
+
+def _planes(verts_cam, faces, K, orthographic):
+    """The nearness of each face on screen as a plane n(x, y) = A x + B y + C, (F, 3), differentiable: 1/z
+    for a pinhole camera, -z for an orthographic one (larger = nearer; as ``coverage`` defines it)."""
+    v = verts_cam[faces]
+    normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    d = (normal * v[:, 0]).sum(-1)
+    Kinv = torch.linalg.inv(K)
+    tiny = torch.finfo(v.dtype).tiny ** 0.5
+    safe = lambda x: torch.where(x.abs() < tiny, torch.where(x < 0, -tiny, tiny), x)
+    if orthographic:
+        e3 = torch.tensor([0.0, 0.0, 1.0], dtype=K.dtype, device=K.device)
+        return (normal[:, :1] * Kinv[0] + normal[:, 1:2] * Kinv[1] - d[:, None] * e3) / safe(normal[:, 2:])
+    return (normal @ Kinv) / safe(d)[:, None]
+
+
+def _with_crossings(edges, prob, p, weld):
+    """Append the lines where two faces pass through each other (``antialias._intersecting_faces``): for a
+    pair (f, g), the segment where f meets g's plane, projected; the image jumps along the part that lies in
+    g and is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
+    verts = prob.params["verts"]
+    f, g = _intersecting_faces(verts.double(), prob.faces, weld)
+    if f.numel() == 0:
+        return edges
+    seg, ok = _crossing_segments(verts.double(), prob.faces, f, g)          # (N, 3, 2, 3), (N, 3)
+    pair, k = ok.nonzero().unbind(1)
+    ends = seg[pair, k]                                                     # (M, 2, 3) world
+    cam = prob.camera0
+    xy, z = cam.project(ends.reshape(-1, 3).to(cam.dtype))
+    xy, z = xy.double().view(-1, 2, 2), z.double().view(-1, 2)
+    keep = (z > cam.near).all(1) & torch.isfinite(xy).all(2).all(1)
+    pair, xy = pair[keep], xy[keep]
+    if pair.numel() == 0:
+        return edges
+    fa, ga = f[pair], g[pair]
+    with torch.no_grad():
+        P = _planes(cam.to_camera(verts.to(cam.dtype)).double(), prob.faces, cam.K.double(), cam.orthographic)
+        grad = (P[fa] - P[ga])[:, :2]                                       # ∇(n_f - n_g): toward f nearer
+        n = -grad / grad.norm(dim=1, keepdim=True).clamp_min(1e-300)        # out of f's region
+    dtype = edges.a.dtype
+    none = torch.full((pair.numel(), 2), -1, dtype=torch.int64, device=pair.device)
+    out = _Edges(torch.cat([edges.a, xy[:, 0].to(dtype)]), torch.cat([edges.b, xy[:, 1].to(dtype)]),
+                 torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, fa]), torch.cat([edges.vid, none]), ga)
+    out.twin = torch.cat([edges.twin, torch.full_like(fa, -1)])
+    out.fold = torch.cat([edges.fold, torch.zeros_like(fa, dtype=torch.bool)])
+    return out
+
+
+def _back_faces_hidden(prob, weld) -> bool:
+    """Can no back face be visible? True when the mesh is closed and consistently oriented (every welded edge
+    a → b has exactly one twin b → a), each of its connected pieces encloses a positive volume (outward
+    normals, front faces counter-clockwise), and every vertex lies beyond the near plane: the camera centre
+    (z = 0) is then outside the convex hull, so outside every piece, and a ray enters a piece through a front
+    face before it can reach a back one. The back faces' edges can then be skipped. A check, never an
+    assumption: anything else keeps every face."""
+    faces = weld[prob.faces]                                                # (F, 3) welded
+    if faces.numel() == 0:
+        return False
+    V = int(weld.max()) + 1
+    a, b = faces.reshape(-1), faces.roll(-1, 1).reshape(-1)
+    sorted_key, counts = torch.unique(a * V + b, return_counts=True)
+    if (counts != 1).any() or (a == b).any():
+        return False
+    twin = b * V + a
+    pos = torch.searchsorted(sorted_key, twin).clamp(max=sorted_key.numel() - 1)
+    if not torch.equal(sorted_key[pos], twin):
+        return False
+    cam = prob.camera0
+    verts = prob.params["verts"].double()
+    if (cam.to_camera(verts.to(cam.dtype)).double()[:, 2] <= cam.near).any():
+        return False
+    label = torch.arange(V, device=faces.device)                            # connected pieces: min label,
+    for _ in range(V):                                                      # spread and jumped to a fixpoint
+        new = label.scatter_reduce(0, a, label[b], reduce="amin").scatter_reduce(0, b, label[a], reduce="amin")
+        new = new[new]
+        if torch.equal(new, label):
+            break
+        label = new
+    v = verts[prob.faces]                                                   # signed volume of each piece
+    vol = (v[:, 0] * torch.linalg.cross(v[:, 1], v[:, 2])).sum(1) / 6
+    piece = torch.unique(label[faces[:, 0]], return_inverse=True)[1]
+    return bool((torch.zeros(int(piece.max()) + 1, dtype=vol.dtype).index_add(0, piece, vol) > 0).all())
+
+
+def _whole_count(face):
+    """_screen_faces lists the unclipped faces first, in increasing id order, then the clipped pieces."""
+    if face.numel() < 2:
+        return face.numel()
+    down = (face[1:] <= face[:-1]).nonzero()
+    return int(down[0]) + 1 if down.numel() else face.numel()
+
+
+def _weld(verts):
+    """(V,) a canonical id per vertex position: vertices at the same place get the same id."""
+    _, inverse = torch.unique(verts.detach(), dim=0, return_inverse=True)
+    return inverse
+
+
+def _pixel_segments(a, b, W, H):
+    """Every edge a → b (E, 2 each, detached) cut at the pixel borders it crosses: the pieces' parameter
+    intervals [s0, s1] (N,), their edge (N,) and pixel (N,) (row-major; pieces outside the image dropped)."""
+    E = a.shape[0]
+    ts = [torch.zeros(E, dtype=a.dtype, device=a.device), torch.ones(E, dtype=a.dtype, device=a.device)]
+    owners = [torch.arange(E, device=a.device)] * 2
+    for axis in range(2):
+        lo, hi = torch.minimum(a[:, axis], b[:, axis]), torch.maximum(a[:, axis], b[:, axis])
+        first = torch.floor(lo) + 1
+        count = (torch.ceil(hi) - first).clamp(min=0).long()               # integers strictly inside (lo, hi)
+        count = torch.where(hi > lo, count, torch.zeros_like(count))
+        edge = torch.repeat_interleave(torch.arange(E, device=a.device), count)
+        k = first[edge] + (torch.arange(edge.numel(), device=a.device)
+                           - torch.repeat_interleave(torch.cumsum(count, 0) - count, count))
+        ts.append(((k - a[edge, axis]) / (b[edge, axis] - a[edge, axis])).clamp(0, 1))
+        owners.append(edge)
+    s, edge = torch.cat(ts), torch.cat(owners)
+    order = torch.argsort(edge.double() * 4 + s)                            # by edge, then along it
+    s, edge = s[order], edge[order]
+    same = edge[1:] == edge[:-1]
+    s0, s1, e = s[:-1][same], s[1:][same], edge[:-1][same]
+    keep = s1 > s0
+    s0, s1, e = s0[keep], s1[keep], e[keep]
+    mid = a[e] + ((s0 + s1) / 2)[:, None] * (b[e] - a[e])
+    col, row = torch.floor(mid[:, 0]), torch.floor(mid[:, 1])
+    inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+    return _split_at_crossings(a, b, s0[inside], s1[inside], e[inside], (row * W + col)[inside].long())
+
+
+def _split_at_crossings(a, b, s0, s1, e, pixel):
+    """Cut every piece of edge (s0, s1, edge e, pixel) where another piece in the same pixel crosses it.
+    Visibility along an edge can change only there (where an occluder's outline passes over it), so each
+    resulting piece is visible all along or nowhere, and one quadrature point decides it."""
+    order = torch.argsort(pixel, stable=True)
+    s0, s1, e, pixel = s0[order], s1[order], e[order], pixel[order]
+    _, counts = torch.unique_consecutive(pixel, return_counts=True)
+    start = torch.repeat_interleave(torch.cumsum(counts, 0) - counts, counts)     # first piece of the pixel
+    size = torch.repeat_interleave(counts, counts)
+    i = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), size)   # every (i, j) pair
+    j = start[i] + (torch.arange(i.numel(), device=pixel.device)
+                    - torch.repeat_interleave(torch.cumsum(size, 0) - size, size))
+    ei, ej = e.index_select(0, i), e.index_select(0, j)
+    other = (ei != ej).nonzero().squeeze(1)
+    i, j, ei, ej = i[other], j[other], ei[other], ej[other]
+    ax, ay = a[:, 0].contiguous(), a[:, 1].contiguous()                     # columns: quick gathers
+    dx, dy = (b[:, 0] - a[:, 0]).contiguous(), (b[:, 1] - a[:, 1]).contiguous()
+    dix, diy, djx, djy = dx.index_select(0, ei), dy.index_select(0, ei), dx.index_select(0, ej), dy.index_select(0, ej)
+    rx = ax.index_select(0, ej) - ax.index_select(0, ei)
+    ry = ay.index_select(0, ej) - ay.index_select(0, ei)
+    den = dix * djy - diy * djx
+    ok = den != 0
+    safe = torch.where(ok, den, torch.ones_like(den))
+    s = (rx * djy - ry * djx) / safe                                        # along i
+    u = (rx * diy - ry * dix) / safe                                        # along j
+    cut = ok & (s > s0.index_select(0, i)) & (s < s1.index_select(0, i)) & (u >= s0.index_select(0, j)) & \
+        (u <= s1.index_select(0, j))
+    piece = torch.cat([torch.arange(pixel.numel(), device=pixel.device)] * 2 + [i[cut]])
+    t = torch.cat([s0, s1, s[cut]])
+    order = torch.argsort(piece.double() * 4 + (t - s0[piece]) / (s1[piece] - s0[piece]).clamp_min(1e-300))
+    piece, t = piece[order], t[order]
+    same = piece[1:] == piece[:-1]
+    lo, hi, owner = t[:-1][same], t[1:][same], piece[:-1][same]
+    keep = hi > lo
+    return lo[keep], hi[keep], e[owner[keep]], pixel[owner[keep]]
+
+
+def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1 << 21):
+    """The face the z-buffer shows at screen points (N, 2), -1 for background or outside the image: the
+    sample z-buffer of ``rasterize(samples=...)`` (same coverage rule and far plane), asked at arbitrary
+    points, with depths compared in float64 (ties to the lower face id), as ``exact_coverage`` orders faces. Each point is tested against the triangles touching its pixel. cull_backfaces: leave
+    the back faces out, when they are known never to be visible (``_back_faces_hidden``)."""
+    W, H = camera.width, camera.height
+    col, row = torch.floor(pts[:, 0]), torch.floor(pts[:, 1])
+    ok = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+    out = torch.full((pts.shape[0],), -1, dtype=torch.int64, device=pts.device)
+    idx = ok.nonzero().squeeze(1)
+    with torch.no_grad():
+        st = _screen_triangles(_camera_space(mesh.verts, camera), mesh.faces, camera, cull_backfaces, reach=0.0)
+        if idx.numel() == 0 or st.face.numel() == 0:
+            return out
+        pix = (row * W + col)[idx].long()
+        px_all, py_all = pts[idx, 0].double().contiguous(), pts[idx, 1].double().contiguous()
+        order = torch.argsort(pix)
+        sorted_pix = pix[order]
+        mask = torch.zeros(H * W, dtype=torch.bool, device=pts.device)
+        mask[pix] = True
+        pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)
+        first = torch.searchsorted(sorted_pix, pair_pix)
+        count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+        q0, qx, qy = _plane(st)
+        X = [st.xy[:, k, 0].contiguous() for k in range(3)]                 # corner columns: quick gathers
+        Y = [st.xy[:, k, 1].contiguous() for k in range(3)]
+        best_q = torch.full((idx.numel(),), -math.inf, dtype=torch.float64, device=pts.device)
+        cand_k, cand_t, cand_q = [], [], []
+        ends = torch.cumsum(count, 0)
+        lo = 0
+        while lo < pair_pix.numel():                                        # about ``budget`` tests at a time
+            hi = int(torch.searchsorted(ends, ends[lo] - count[lo] + budget, right=True).clamp(min=lo + 1))
+            c = count[lo:hi]
+            pair = torch.repeat_interleave(torch.arange(lo, hi, device=pts.device), c)
+            k = order[first[pair] + (torch.arange(pair.numel(), device=pts.device)
+                                     - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]
+            t = tri.index_select(0, pair)
+            px, py = px_all.index_select(0, k), py_all.index_select(0, k)
+            inside = torch.ones_like(px, dtype=torch.bool)
+            for c in range(3):                                              # scan._sample_inside, by columns
+                ax, ay = X[c].index_select(0, t), Y[c].index_select(0, t)
+                bx, by = X[(c + 1) % 3].index_select(0, t), Y[(c + 1) % 3].index_select(0, t)
+                e = (ax - px) * (by - py) - (ay - py) * (bx - px)          # scan.edge_function
+                top_left = (by - ay < 0) | ((by == ay) & (bx > ax))         # scan._is_top_left
+                inside &= (e > 0) | ((e == 0) & top_left)
+            sel = inside.nonzero().squeeze(1)
+            k, t, px, py = k[sel], t[sel], px[sel], py[sel]
+            q = q0.index_select(0, t) + qx.index_select(0, t) * px + qy.index_select(0, t) * py
+            depth = q if camera.orthographic else 1 / q
+            keep = (depth <= camera.far).nonzero().squeeze(1)
+            # nearest = smallest depth, compared in float64 (the points lie 1e-6 px from edges, where two
+            # faces that share the edge differ in depth by far less than float32 resolves)
+            near = -q if camera.orthographic else q                         # larger = nearer
+            k, t, near = k[keep], t[keep], near[keep]
+            best_q.scatter_reduce_(0, k, near, reduce="amax")
+            cand_k.append(k), cand_t.append(t), cand_q.append(near)
+            lo = hi
+        k, t, near = torch.cat(cand_k), torch.cat(cand_t), torch.cat(cand_q)
+        win = (near == best_q[k]).nonzero().squeeze(1)                      # ties: the lower face id
+        face = torch.full((idx.numel(),), torch.iinfo(torch.int64).max, dtype=torch.int64, device=pts.device)
+        face.scatter_reduce_(0, k[win], st.face[t[win]], reduce="amin")
+        out[idx] = torch.where(face == torch.iinfo(torch.int64).max, torch.full_like(face, -1), face)
+    return out
+
+
+def boundary_points(prob, p, *, order=None, samples=None, generator=None):
+    """Points on the edges where the integrand of the boundary term is evaluated, with their weights.
+
+    Quadrature (``order``): Gauss-Legendre nodes on every piece of edge inside one pixel, weight = node
+    weight × the piece's length. Sampling (``samples``): points on the edges with probability proportional
+    to length, weight = total length / samples. Returns edge data and per point: edge (N,), s (N,),
+    weight (N,), pixel (N,).
+    """
+    edges = _edges(prob, p)
+    a, b = edges.a, edges.b
+    W, H = prob.camera0.width, prob.camera0.height
+    ad, bd = a.detach(), b.detach()
+    length = (bd - ad).norm(dim=1)
+    if order is not None:
+        s0, s1, e, pix = _pixel_segments(ad, bd, W, H)
+        x, w = np.polynomial.legendre.leggauss(int(order))
+        x = torch.as_tensor(x, dtype=s0.dtype, device=s0.device)
+        w = torch.as_tensor(w, dtype=s0.dtype, device=s0.device)
+        half = (s1 - s0) / 2
+        s = ((s0 + s1) / 2)[:, None] + half[:, None] * x                   # (N, q)
+        weight = (half * length[e])[:, None] * w
+        q = x.numel()
+        e, pix = e[:, None].expand(-1, q).reshape(-1), pix[:, None].expand(-1, q).reshape(-1)
+        s, weight = s.reshape(-1), weight.reshape(-1)
+    else:
+        total = length.sum()
+        if samples is None or int(samples) < 1:
+            raise ValueError(f"samples must be a positive int, got {samples!r}")
+        if float(total) == 0:
+            empty = torch.zeros(0, dtype=torch.int64, device=a.device)
+            return edges, empty, a.new_zeros(0).detach(), a.new_zeros(0).detach(), empty
+        e = torch.multinomial(length / total, int(samples), replacement=True, generator=generator)
+        s = torch.rand(int(samples), dtype=ad.dtype, generator=generator).to(ad.device)
+        weight = torch.full_like(s, float(total) / int(samples))
+        pt = ad[e] + s[:, None] * (bd[e] - ad[e])
+        col, row = torch.floor(pt[:, 0]), torch.floor(pt[:, 1])
+        inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+        e, s, weight = e[inside], s[inside], weight[inside]
+        pix = (row * W + col)[inside].long()
+    return edges, e, s, weight, pix
+
+
+def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
+    """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
+    differentiated by autograd through the edges' screen positions (see the module docstring)."""
+    p = prob.leaves(names)
+    edges, e, s, weight, pix = boundary_points(prob, p, order=order, samples=samples, generator=generator)
+    a, b, n, face, vid = edges.a, edges.b, edges.n, edges.face, edges.vid
+    leaves = [p[k] for k in names]
+    if e.numel() == 0:
+        return tuple(torch.zeros_like(x) for x in leaves)
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    with torch.no_grad():
+        x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
+        inside, outside = _visible_at(mesh, cam, torch.cat([x - OFFSET * n[e], x + OFFSET * n[e]]),
+                                      edges.culled).chunk(2)
+        colors = p["colors"].detach()
+        w = prob.weights.reshape(-1, 3)[pix]
+        ends = vid[e]
+        if prob.model == "affine":                                          # each face's colour field at x
+            field = _Field(prob.params["verts"], prob.faces, prob.camera(prob.params))
+            color_of = lambda f: field.colors(f.clamp(min=0), torch.zeros_like(f), x, colors)
+        else:
+            color_of = lambda f: colors[f.clamp(min=0)]
+
+        def term(owner, inner, outer):
+            """(N,) w · (c_owner - c_outer), where the owner shows on its inner side, halved when the face
+            beyond also has this edge (it finds the same boundary from its side)."""
+            c_out = torch.where((outer >= 0)[:, None], color_of(outer), prob.background)
+            beyond = prob.weld[prob.faces[outer.clamp(min=0)]]              # (N, 3)
+            shared = (outer >= 0) & (ends >= 0).all(1) & (beyond == ends[:, :1]).any(1) & \
+                (beyond == ends[:, 1:]).any(1)
+            t = (w * (color_of(owner) - c_out)).sum(1) * torch.where(shared, 0.5, 1.0)
+            return torch.where((owner >= 0) & (inner == owner), t, torch.zeros_like(t))
+
+        value = term(face[e], inside, outside)                              # the edge's face
+        twin, fold = edges.twin[e], edges.fold[e]                           # the face sharing it: same samples,
+        value = value + torch.where(fold, term(twin, inside, outside),      # its normal along n (a fold) or
+                                    -term(twin, outside, inside))           # against it
+        value = value * weight
+    keep = (value != 0).nonzero().squeeze(1)
+    e, s, value = e[keep], s[keep], value[keep]
+    # face edges: the point moves with the edge's ends, d/dπ (n · x) = v_n
+    m = e < edges.n_edges
+    xq = a[e[m]] + s[m, None] * (b[e[m]] - a[e[m]])                         # differentiable in π
+    surrogate = (value[m] * (xq * n[e[m]]).sum(1)).sum()                    # d/dπ = Σ value · v_n
+    if (~m).any():                                                          # intersection lines: where
+        k = e[~m]                                                           # n_f - n_g = 0, moving at
+        cam = prob.camera(p)                                                # v_n = ∂(n_f - n_g)/∂π / |∇|
+        planes = _planes(cam.to_camera(p["verts"]), prob.faces, cam.K, cam.orthographic)
+        L = planes[face[k]] - planes[edges.other[k - edges.n_edges]]        # (N, 3)
+        x = (a[k] + s[~m, None] * (b[k] - a[k])).detach()
+        size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
+        surrogate = surrogate + (value[~m] * (L[:, 0] * x[:, 0] + L[:, 1] * x[:, 1] + L[:, 2]) / size).sum()
+    if prob.model == "affine":                                          # the interior term: the colour field
+        surrogate = surrogate + _interior(prob, p)                          # moves under fixed pieces
+    if not surrogate.requires_grad:
+        return tuple(torch.zeros_like(x) for x in leaves)
+    g = torch.autograd.grad(surrogate, leaves, allow_unused=True)
+    return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+
+
+def _interior(prob, p):
+    """``Σ w · area · c(centroid; π)`` over the visible pieces, with the pieces' areas and centroids held
+    fixed: its derivative is ``∫ ∂c/∂π`` over each piece, exact since ∂c/∂π is affine on screen too."""
+    mesh, cam = prob.mesh(p), prob.camera(p)
+    with torch.no_grad():
+        pieces = list(_region_chunks(mesh.verts.detach(), mesh.faces, prob.camera(prob.params), prob.dtype))
+    field = _Field(mesh.verts, mesh.faces, cam)
+    w = prob.weights.reshape(-1, 3)
+    total = 0.0
+    for r in pieces:
+        if r.pixel.numel():
+            field.check(torch.unique(r.face), "image_gradient")
+            c = field.colors(r.face, r.pixel, polygon_centroids(r.verts, r.count), p["colors"])
+            total = total + (w[r.pixel] * r.area[:, None] * c).sum()
+    return total
