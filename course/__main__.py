@@ -6,7 +6,7 @@ import importlib
 import sys
 
 COMMANDS = {
-    "render": ("course.render", "render a mesh (or the bundled default scene) to a PNG"),
+    "render": ("course.render_cli", "render a mesh (or the bundled default scene) to a PNG"),
     "bench": ("course.bench", "time against error, side by side"),
     "grade": ("course.grading.grader", "grade exercise notebooks in fresh kernels"),
     "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),

@@ -27,9 +27,7 @@ supersampling alone does not replace.
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
@@ -37,12 +35,13 @@ import torch
 
 from course.antialias import discontinuity_pixels, resolve, sample_fragments
 from course.camera import Camera
+from course.framing import default_lights, frame_camera
 from course.mesh import Mesh
 from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.raytrace import BVH
 from course.raytrace import visible as ray_visible
 from course.shading import (
-    AmbientLight, DirectionalLight, Material, PointLight, _face_material, flat_shading, gouraud_shading, light_terms,
+    DirectionalLight, Material, PointLight, _face_material, flat_shading, gouraud_shading, light_terms,
     mip_pyramid, normalize, phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions,
     wireframe_overlay,
 )
@@ -51,7 +50,7 @@ from course.soft import nmr_image, soft_rasterize
 from course.tensors import as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
-           "default_lights", "cli", "SHADING_MODES"]
+           "default_lights", "SHADING_MODES"]
 
 SHADING_MODES = ("phong", "gouraud", "flat", "unlit", "silhouette", "wireframe", "depth", "normals")
 LIT_MODES = ("phong", "gouraud", "flat")
@@ -617,113 +616,3 @@ def _result(image, frags, pixel_normals, settings, ran, silhouette=None) -> Rend
         fragments=frags,
         passes=tuple(ran),
     )
-
-
-# ------------------------------------------------------------------------------------ framing and lights
-
-def frame_camera(meshes, *, width: int, height: int, fov_y: float = 40.0, eye=None,
-                 direction=(0.6, 0.45, 1.0), margin: float = 1.05) -> Camera:
-    """A perspective camera that sees the whole bounding sphere of ``meshes`` (one Mesh or a sequence).
-
-    The camera looks at the sphere's centre from ``eye`` if given (world space), else from ``direction``
-    (from the centre toward the camera) at the distance where the sphere, grown by ``margin``, just fits
-    the narrower field of view. near/far hug the sphere.
-    """
-    meshes = (meshes,) if isinstance(meshes, Mesh) else tuple(meshes)
-    verts = torch.cat([m.verts.detach() for m in meshes])                    # (V, 3) world
-    center = (verts.min(0).values + verts.max(0).values) / 2
-    radius = float((verts - center).norm(dim=-1).max().clamp_min(1e-6)) * margin
-    half = math.atan(math.tan(math.radians(fov_y) / 2) * min(1.0, width / height))   # narrower half-angle
-    if eye is None:
-        toward_eye = normalize(as_tensor(direction, dtype=verts.dtype, device=verts.device, name="direction"))
-        eye = center + toward_eye * (radius / math.sin(half))
-    eye = as_tensor(eye, dtype=verts.dtype, device=verts.device, name="eye")
-    dist = float((eye - center).norm())
-    up = (0.0, 1.0, 0.0) if float(normalize(eye - center)[1].abs()) < 0.99 else (0.0, 0.0, -1.0)
-    return Camera.look_at(eye, center, up, fov_y=fov_y, width=width, height=height,
-                          near=max(dist - 1.5 * radius, 1e-3 * dist), far=dist + 1.5 * radius)
-
-
-def default_lights() -> tuple:
-    """A soft ambient fill and a key light from the upper left, in front (travelling down-right-back)."""
-    return (AmbientLight(intensity=0.25), DirectionalLight(direction=(0.5, -0.7, -0.6), intensity=0.9))
-
-
-# -------------------------------------------------------------------------------------------- command line
-
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m course render",
-                                description="Render a mesh (default: the bundled textured teapot) to a PNG.")
-    p.add_argument("mesh", nargs="?", help="mesh file (any format trimesh reads); omit for the default scene")
-    p.add_argument("--out", required=True, help="output PNG path (8-bit, sRGB-encoded from the linear render)")
-    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="image size in pixels")
-    p.add_argument("--width", type=int, help="image width in pixels (default 512)")
-    p.add_argument("--height", type=int, help="image height in pixels (default: the width)")
-    p.add_argument("--eye", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera position (world)")
-    p.add_argument("--fov", type=float, default=40.0, help="vertical field of view in degrees (default 40)")
-    p.add_argument("--shading", default="phong", choices=SHADING_MODES, help="shading mode (default phong)")
-    p.add_argument("--wireframe", action="store_true", help="draw the visible edges on top")
-    p.add_argument("--antialias", default="none", choices=ANTIALIAS_MODES,
-                   help="none (one sample per pixel, the default), supersample (k x k samples in every pixel) or "
-                        "adaptive (k x k only where an edge crosses the pixel)")
-    p.add_argument("--samples", type=int, default=4, metavar="K", help="samples per axis when antialiasing (4)")
-    p.add_argument("--shadows", default="none", choices=SHADOW_MODES,
-                   help="none (default), map (shadow maps) or rays (shadow rays through a BVH) for the key light")
-    p.add_argument("--texture-filter", default="bilinear", choices=TEXTURE_FILTERS,
-                   help="texture lookup: nearest, bilinear (default) or trilinear (mipmaps)")
-    p.add_argument("--background", nargs=3, type=float, default=(1.0, 1.0, 1.0), metavar=("R", "G", "B"),
-                   help="background colour, linear RGB in [0, 1] (default white)")
-    return p
-
-
-def _image_size(args) -> tuple[int, int]:
-    if args.size and (args.width or args.height):
-        raise ValueError("give either --size W H or --width/--height, not both")
-    width, height = args.size or (args.width or args.height or 512, args.height or args.width or 512)
-    if width < 1 or height < 1:
-        raise ValueError(f"image size must be positive, got {width}x{height}")
-    return width, height
-
-
-def _save_png(image: torch.Tensor, path: str, srgb: bool = True) -> None:
-    """Write a linear RGB image (H, W, 3) as an 8-bit PNG: clamped to [0, 1], sRGB-encoded (IEC 61966-2-1,
-    what PNG viewers assume) unless ``srgb=False``, then rounded to 0..255."""
-    from PIL import Image
-    from course.shading import linear_to_srgb
-    image = image.detach().clamp(0, 1)
-    if srgb:
-        image = linear_to_srgb(image)
-    pixels = (image.cpu().numpy() * 255 + 0.5).astype("uint8")
-    Image.fromarray(pixels, mode="RGB").save(path, format="PNG")
-
-
-def cli(argv: list[str]) -> int:
-    """``python -m course render [MESH] --out FILE.png [options]``; returns the exit code."""
-    try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exit_:                                              # --help or a usage error
-        return int(exit_.code or 0)
-    from course import mesh as mesh_module
-    from course import models
-    try:
-        width, height = _image_size(args)
-        if args.mesh is None:
-            mesh = models.default_scene_mesh()
-        else:
-            try:
-                mesh = mesh_module.load_mesh(args.mesh)
-            except Exception as err:                                         # any failure of a user's file
-                message = str(err) if args.mesh in str(err) else f"cannot read mesh {args.mesh!r}: {err}"
-                raise ValueError(message) from err
-        mesh = mesh.to(dtype=torch.float32)
-        camera = frame_camera(mesh, width=width, height=height, fov_y=args.fov, eye=args.eye)
-        scene = Scene(mesh, camera, lights=default_lights(), background=args.background)
-        result = render(scene, RenderSettings(shading=args.shading, wireframe=args.wireframe,
-                                              antialias=args.antialias, samples=args.samples,
-                                              texture_filter=args.texture_filter, shadows=args.shadows))
-        _save_png(result.image, args.out)
-    except (ValueError, TypeError, OSError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-    print(f"wrote {args.out} ({width}x{height})")
-    return 0

@@ -8,8 +8,9 @@ from course.camera import Camera
 from course.mesh import Mesh
 from course.models import cube, default_scene_mesh, icosphere, plane
 from course.render import (
-    SHADING_MODES, RenderSettings, Scene, cli, default_lights, frame_camera, plan_passes, render,
+    SHADING_MODES, RenderSettings, Scene, default_lights, frame_camera, plan_passes, render,
 )
+from course.render_cli import cli
 from course.shading import AmbientLight, DirectionalLight, Material, PointLight
 
 
