@@ -127,9 +127,11 @@ def _with_crossings(edges, prob, p, weld):
     pair (f, g), the segment where f meets g's plane, projected; the image jumps along the part that lies in
     g and is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
     verts = prob.params["verts"]
-    f, g = _intersecting_faces(verts.double(), prob.faces, weld)
-    if f.numel() == 0:
+    cand = torch.unique(edges.face)                                         # faces that can show (in front of
+    f, g = _intersecting_faces(verts.double(), prob.faces[cand], weld)      # the camera; front faces when
+    if f.numel() == 0:                                                      # back ones never show)
         return edges
+    f, g = cand[f], cand[g]
     seg, ok = _crossing_segments(verts.double(), prob.faces, f, g)          # (N, 3, 2, 3), (N, 3)
     pair, k = ok.nonzero().unbind(1)
     ends = seg[pair, k]                                                     # (M, 2, 3) world
