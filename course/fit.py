@@ -1,0 +1,428 @@
+"""Optimisation loops for inverse rendering (lecture 10): a mesh from silhouettes, a camera from an image.
+
+Every loop is seeded, shows a ``tqdm.auto`` progress bar (silenced by ``progress=False`` or the
+environment variable ``TQDM_DISABLE=1``), and returns a result whose ``.history`` holds the loss at every
+step and snapshots at chosen steps, so a notebook can plot the curve and animate the fit.
+
+**A mesh from silhouettes** (Kato et al. 2018, "optimizing mesh to match a projection";
+``fit_silhouettes``). The target silhouettes are the *hard* rasterizer's coverage masks of the target
+mesh (0 / 1 per pixel centre, back faces kept, so an open mesh such as the teapot shows no holes). The
+fitted mesh is a closed, welded icosphere (``models.icosphere``) moved by a per-vertex offset, the only
+parameter, optimised with Adam. Each step renders the current mesh from every training view with a
+differentiable rasterizer, soft rasterization (``method="soft"``, Liu et al. 2019) or the Neural 3D Mesh
+Renderer's approximate gradient (``method="nmr"``), and minimises
+
+    L = Σ_views L_sl(ŝ, s) / N  +  smoothness · L_sm  +  laplacian · L_lap  +  edge_length · L_edge
+
+(``course.losses``: Kato et al.'s IoU loss, their smoothness loss, the uniform Laplacian and the
+edge-length variance). The metric is the mean IoU of hard renders of the fitted and target meshes over
+held-out views (``sphere_views``: a Fibonacci spiral, disjoint from the training ring), at the training
+resolution.
+
+**A camera from one image** (``fit_camera``). Intrinsics known; the pose is parameterised about the start
+camera, object-centred: the world is first turned about the point ``target`` by ``Q = exp([ω]ₓ)``
+(axis-angle ω in world axes, starting at 0, so no singularity near the start, unlike Euler angles), then
+seen by the start camera, then shifted by ``s`` in camera space:
+``x_cam = R_start (target + Q (x - target)) + t_start + s``, i.e. ``R = R_start Q``. Turning ω orbits the
+camera about the object (the silhouette changes shape but stays put), and ``s`` moves the image; with
+the rotation about the camera's own centre instead (``R_start exp([ω]ₓ)``, centre free) a silhouette fit
+from 30° away stalls in a local minimum that re-centres the image by turning the camera in place
+(measured: the error grew from 30° to 35°). The loss is the IoU loss on a silhouette reference (H, W) or the L2 loss on a colour reference
+(H, W, C), rendered by soft rasterization or NMR. Errors are the geodesic rotation angle in degrees and
+``|c - c_ref| / |c_ref - target|`` in percent of the reference's viewing distance.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import torch
+
+from . import losses, models
+from .camera import Camera, axis_angle_to_matrix
+from .mesh import Mesh
+from .raster import rasterize
+from .soft import nmr_rasterize, soft_rasterize
+
+__all__ = ["FitHistory", "SilhouetteFit", "CameraFit", "circle_views", "sphere_views", "hard_silhouettes",
+           "held_out_iou", "fit_silhouettes", "fit_mesh_from_silhouettes", "fit_camera", "rotation_error",
+           "center_error"]
+
+_METHODS = ("soft", "nmr")
+
+
+# ------------------------------------------------------------------------------------------ histories
+
+@dataclass
+class FitHistory:
+    """What a loop recorded. ``loss``: one float per step (the total loss *before* that step's update);
+    ``snapshot_steps``: the steps at which ``snapshots`` were taken (step k is the state before update k;
+    step ``steps`` is the final state); ``snapshots``: detached copies (vertices (V, 3) for a mesh fit,
+    rendered images (H, W) or (H, W, C) for a camera fit); ``metrics``: named per-step series (e.g. the
+    rotation error of a camera fit)."""
+    loss: list = field(default_factory=list)
+    snapshot_steps: list = field(default_factory=list)
+    snapshots: list = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+
+
+@dataclass
+class SilhouetteFit:
+    """``mesh``: the fitted Mesh (target's world frame); ``history``; ``start_iou`` / ``iou``: the held-out
+    mean IoU of the start sphere and of the result; ``per_view_iou``: (N,) the result's held-out IoUs."""
+    mesh: Mesh
+    history: FitHistory
+    start_iou: float
+    iou: float
+    per_view_iou: torch.Tensor
+
+
+@dataclass
+class CameraFit:
+    """``camera``: the fitted Camera; ``history`` (metrics ``"rotation_deg"`` and ``"center_pct"`` per step
+    when a reference camera was given); the final errors, or None without a reference camera."""
+    camera: Camera
+    history: FitHistory
+    rotation_error_deg: float | None = None
+    center_error_pct: float | None = None
+
+
+# ---------------------------------------------------------------------------------------------- views
+
+def circle_views(n: int, *, distance: float = 3.0, elevations=(25.0, -25.0), size: int = 64, fov_y: float = 40.0,
+                 target=(0.0, 0.0, 0.0), dtype=None, device=None) -> list:
+    """``n`` cameras looking at ``target``, azimuths evenly spaced over 360°, elevations (degrees) taking turns
+    from ``elevations`` (so 8 views alternate above and below). size: the square image's side in pixels."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    cams = []
+    for k in range(n):
+        az, el = 2 * math.pi * k / n, math.radians(elevations[k % len(elevations)])
+        eye = (distance * math.cos(el) * math.sin(az), distance * math.sin(el), distance * math.cos(el) * math.cos(az))
+        cams.append(_look(eye, target, size, fov_y, dtype, device))
+    return cams
+
+
+def sphere_views(n: int = 16, *, distance: float = 3.0, size: int = 64, fov_y: float = 40.0, target=(0.0, 0.0, 0.0),
+                 offset: float = 0.3, dtype=None, device=None) -> list:
+    """``n`` cameras spread evenly over the sphere (a Fibonacci spiral, offset by half a step so that no view
+    coincides with a ``circle_views`` view): the held-out views."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    golden = math.pi * (3 - math.sqrt(5))
+    cams = []
+    for k in range(n):
+        y = 1 - 2 * (k + 0.5) / n
+        r = math.sqrt(max(0.0, 1 - y * y))
+        az = golden * k + offset
+        cams.append(_look((distance * r * math.sin(az), distance * y, distance * r * math.cos(az)), target, size,
+                          fov_y, dtype, device))
+    return cams
+
+
+def _look(eye, target, size, fov_y, dtype, device):
+    # up = +y, unless the view is (nearly) vertical: then +z
+    d = [e - t for e, t in zip(eye, target)]
+    horizontal = math.hypot(d[0], d[2]) / max(math.sqrt(sum(x * x for x in d)), 1e-12)
+    up = (0.0, 1.0, 0.0) if horizontal > 1e-3 else (0.0, 0.0, 1.0)
+    return Camera.look_at(eye, target, up, fov_y=fov_y, width=size, height=size,
+                          dtype=dtype or torch.float32, device=device)
+
+
+def hard_silhouettes(mesh, cameras) -> torch.Tensor:
+    """(N, H, W) 0 / 1 coverage of the hard rasterizer (back faces kept), one per camera; no gradient."""
+    with torch.no_grad():
+        return torch.stack([rasterize(mesh, c, cull_backfaces=False).mask.to(mesh.verts.dtype) for c in cameras])
+
+
+def held_out_iou(mesh, target_mesh, cameras) -> torch.Tensor:
+    """(N,) ``losses.iou`` of the hard silhouettes of ``mesh`` and ``target_mesh`` from each camera."""
+    return losses.iou(hard_silhouettes(mesh, cameras), hard_silhouettes(target_mesh, cameras).to(mesh.verts.dtype))
+
+
+# ------------------------------------------------------------------------------------------ helpers
+
+def _progress(total, progress, desc):
+    from tqdm.auto import tqdm
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
+    return tqdm(total=total, desc=desc, disable=disable, leave=False)
+
+
+def _check_common(steps, lr, method, snapshot_every):
+    if not (isinstance(steps, int) and steps >= 0):
+        raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+    if not (isinstance(lr, (int, float)) and math.isfinite(lr) and lr > 0):
+        raise ValueError(f"lr must be a positive finite number, got {lr!r}")
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    if snapshot_every is not None and not (isinstance(snapshot_every, int) and snapshot_every >= 1):
+        raise ValueError(f"snapshot_every must be a positive integer or None, got {snapshot_every!r}")
+
+
+def _silhouette(mesh, camera, method, sigma):
+    if method == "soft":
+        return soft_rasterize(mesh, camera, mode="silhouette", sigma=sigma, cull_backfaces=False)
+    return nmr_rasterize(mesh, camera, cull_backfaces=False)
+
+
+def _schedule(start, end, steps):
+    """steps + 1 values from start to end, geometrically (all ``start`` when end is None)."""
+    for name, v in (("sigma", start), ("sigma_end", end)):
+        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+    if start is None:
+        raise ValueError("sigma must be a positive finite number, got None")
+    if end is None or steps == 0:
+        return [float(start)] * (steps + 1)
+    return [float(start) * (end / start) ** (k / steps) for k in range(steps + 1)]
+
+
+def _snap_due(step, steps, snapshot_every):
+    return snapshot_every is not None and (step % snapshot_every == 0 or step == steps)
+
+
+# --------------------------------------------------------------------------------- mesh from silhouettes
+
+def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "soft", lr: float = 0.01,
+                    smoothness: float = 0.0005, laplacian: float = 0.0, edge_length: float = 0.0,
+                    sigma: float = 3e-4, seed: int = 0, start=None, subdivisions: int = 3,
+                    radius: float = 0.5, held_out=None, snapshot_every: int | None = 10,
+                    progress: bool = True) -> SilhouetteFit:
+    """Deform a sphere so that its silhouettes from ``cameras`` match those of ``target_mesh``.
+
+    Args:
+        target_mesh: a Mesh (``verts`` (V, 3), ``faces`` (F, 3)); only its hard silhouettes are used.
+        cameras: a non-empty list of ``Camera`` (the training views), all of one image size.
+        steps: Adam steps. method: ``"soft"`` (soft rasterization, sharpness ``sigma`` in NDC units, see
+            ``course.soft``) or ``"nmr"`` (hard forward, Kato et al.'s approximate gradient).
+        lr: Adam's learning rate on the per-vertex offset (world units).
+        smoothness, laplacian, edge_length: weights of ``losses.smoothness_loss`` (Kato et al.),
+            ``losses.laplacian_loss`` (uniform) and ``losses.edge_length_loss``; 0 turns a term off.
+            The silhouette term is the IoU loss averaged over views.
+        seed: seeds the small random jitter added to the start (1e-3 of the radius), so runs with one seed
+            are identical and different seeds differ.
+        start: a Mesh to deform instead of the sphere (it should be closed and welded), or None for
+            ``models.icosphere(subdivisions, radius)``.
+        held_out: cameras for the metric, or None for ``sphere_views(16)`` at the training image size.
+        snapshot_every: keep the vertices every this many steps (and the last); None: none.
+        progress: show a tqdm bar (``TQDM_DISABLE=1`` also hides it).
+
+    Returns a ``SilhouetteFit``; ``history.loss`` has ``steps`` entries, ``history.metrics["iou_loss"]`` the
+    silhouette term alone.
+    """
+    _check_common(steps, lr, method, snapshot_every)
+    if not isinstance(cameras, (list, tuple)) or len(cameras) == 0 or not all(isinstance(c, Camera) for c in cameras):
+        raise ValueError("cameras must be a non-empty list of Camera")
+    if len({(c.height, c.width) for c in cameras}) != 1:
+        raise ValueError("all cameras must have the same image size")
+    if not isinstance(target_mesh, Mesh):
+        raise ValueError(f"target_mesh must be a Mesh, got {type(target_mesh).__name__}")
+    for name, w in (("smoothness", smoothness), ("laplacian", laplacian), ("edge_length", edge_length)):
+        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
+            raise ValueError(f"{name} must be a non-negative number, got {w!r}")
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a positive finite number, got {sigma!r}")
+    dtype, device = target_mesh.verts.dtype, target_mesh.verts.device
+    if start is None:
+        start = models.icosphere(subdivisions, radius, dtype=dtype, device=device)
+    elif not isinstance(start, Mesh):
+        raise ValueError(f"start must be a Mesh or None, got {type(start).__name__}")
+    H, W = cameras[0].height, cameras[0].width
+    if held_out is None:
+        held_out = sphere_views(16, size=W, dtype=cameras[0].dtype, device=device) if H == W else None
+        if held_out is None:
+            raise ValueError("non-square training images: pass held_out cameras")
+
+    gen = torch.Generator(device="cpu").manual_seed(int(seed))
+    base = start.verts.detach().to(dtype)
+    scale = float(base.norm(dim=1).max())
+    jitter = (torch.rand(base.shape, generator=gen, dtype=torch.float64) - 0.5).to(dtype=dtype, device=device)
+    base = base + 2e-3 * scale * jitter
+    faces = start.faces
+    targets = hard_silhouettes(target_mesh, cameras).to(dtype)              # (N, H, W)
+    offset = torch.zeros_like(base, requires_grad=True)
+    opt = torch.optim.Adam([offset], lr=lr)
+    history = FitHistory(metrics={"iou_loss": []})
+    start_iou = held_out_iou(Mesh(base, faces), target_mesh, held_out).mean()
+
+    bar = _progress(steps, progress, f"fit_silhouettes ({method})")
+    for step in range(steps + 1):
+        verts = base + offset
+        if _snap_due(step, steps, snapshot_every):
+            history.snapshot_steps.append(step)
+            history.snapshots.append(verts.detach().clone())
+        if step == steps:
+            break
+        mesh = Mesh(verts, faces)
+        pred = torch.stack([_silhouette(mesh, c, method, sigma) for c in cameras])   # (N, H, W)
+        sil = losses.silhouette_iou_loss(pred.clamp(0, 1), targets, reduction="mean")
+        loss = sil
+        if smoothness:
+            loss = loss + smoothness * losses.smoothness_loss(verts, faces)
+        if laplacian:
+            loss = loss + laplacian * losses.laplacian_loss(verts, faces)
+        if edge_length:
+            loss = loss + edge_length * losses.edge_length_loss(verts, faces)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        history.loss.append(float(loss.detach()))
+        history.metrics["iou_loss"].append(float(sil.detach()))
+        bar.update(1)
+        bar.set_postfix(loss=f"{history.loss[-1]:.4f}")
+    bar.close()
+    fitted = Mesh((base + offset).detach(), faces)
+    per_view = held_out_iou(fitted, target_mesh, held_out)
+    return SilhouetteFit(fitted, history, float(start_iou), float(per_view.mean()), per_view)
+
+
+def fit_mesh_from_silhouettes(target_mesh, *, n_views: int = 8, seed: int = 0, size: int = 64, steps: int = 300,
+                              method: str = "soft", layout: str = "sphere", progress: bool = True,
+                              **kwargs) -> SilhouetteFit:
+    """The issue's entry point: ``fit_silhouettes`` from ``n_views`` training views at distance 3 with a 40°
+    field of view, ``size`` x ``size`` pixels, held out on ``sphere_views(16, size=size)``. layout:
+    ``"sphere"``: ``sphere_views(n_views, offset=1.9)`` (spread over the sphere; never at a held-out view,
+    since the spirals' heights differ), or ``"ring"``: ``circle_views(n_views)`` (alternating ±25°)."""
+    if layout not in ("sphere", "ring"):
+        raise ValueError(f'layout must be "sphere" or "ring", got {layout!r}')
+    like = dict(size=size, dtype=target_mesh.verts.dtype, device=target_mesh.verts.device)
+    cams = sphere_views(n_views, offset=1.9, **like) if layout == "sphere" else circle_views(n_views, **like)
+    return fit_silhouettes(target_mesh, cams, steps=steps, method=method, seed=seed, progress=progress, **kwargs)
+
+
+# ------------------------------------------------------------------------------------ camera from image
+
+def rotation_error(R1, R2) -> float:
+    """Geodesic angle between two rotation matrices (3, 3), in degrees."""
+    c = ((torch.trace(R1.detach().double().T @ R2.detach().double()) - 1) / 2).clamp(-1, 1)
+    return math.degrees(float(torch.acos(c)))
+
+
+def center_error(camera, reference, target=(0.0, 0.0, 0.0)) -> float:
+    """``|c - c_ref| / |c_ref - target|`` in percent: camera-centre error relative to the viewing distance."""
+    c, c_ref = camera.eye.detach().double(), reference.eye.detach().double()
+    tgt = torch.as_tensor(target, dtype=torch.float64, device=c.device)
+    return 100 * float((c - c_ref).norm() / (c_ref - tgt).norm())
+
+
+def _render_for_camera(mesh, camera, method, sigma, face_colors, background):
+    if face_colors is None:
+        if method == "soft":
+            return soft_rasterize(mesh, camera, mode="silhouette", sigma=sigma, cull_backfaces=False)
+        return nmr_rasterize(mesh, camera, cull_backfaces=False)
+    if method == "soft":
+        return soft_rasterize(mesh, camera, mode="color", sigma=sigma, gamma=1e-4, face_colors=face_colors,
+                              background=background, cull_backfaces=True)
+    return nmr_rasterize(mesh, camera, face_colors=face_colors, background=background, cull_backfaces=True)
+
+
+def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method: str = "soft", lr: float = 0.02,
+               lr_position: float | None = None, sigma: float = 1e-3, sigma_end: float | None = 3e-5,
+               lr_end: float = 0.1, face_colors=None, background=0.0,
+               reference_camera=None, target=(0.0, 0.0, 0.0), seed: int = 0, snapshot_every: int | None = 10,
+               progress: bool = True) -> CameraFit:
+    """Recover a camera pose from one reference image of a known mesh, intrinsics known.
+
+    Args:
+        mesh: the Mesh seen in the reference.
+        reference_image: (H, W) silhouette in [0, 1] (IoU loss) or (H, W, C) colours (L2 loss, needs
+            ``face_colors``), the size of ``camera_start``'s image.
+        camera_start: the initial ``Camera``; K, image size, near and far are kept.
+        steps: Adam steps. method: ``"soft"`` or ``"nmr"``.
+        lr: Adam's learning rate on the axis-angle ω (radians), the orbit about ``target``.
+        lr_position: Adam's learning rate on the camera-space shift s (world units); None: ``lr`` times
+            the start's distance to ``target``.
+        sigma, sigma_end: soft rasterization's sharpness (NDC units), annealed geometrically from ``sigma`` to
+            ``sigma_end`` over the steps (coarse to fine: a blurred silhouette pulls from far away, a sharp one
+            pins the pose); ``sigma_end=None`` keeps ``sigma``. Unused by NMR.
+        lr_end: both learning rates decay exponentially to this fraction of their start by the last step.
+        face_colors: (F, C) flat colours for a colour
+            reference (None: silhouette). background: the colour reference's background.
+        reference_camera: the true camera, if known: the errors are then recorded per step and at the end.
+        target: (3,) the orbit's pivot, and the point the centre error's distance is measured to.
+        seed: accepted for a uniform interface; the loop itself draws no random numbers.
+        snapshot_every: keep the rendered image every this many steps (and the last); None: none.
+
+    Returns a ``CameraFit``; ``history.loss`` has ``steps`` entries.
+    """
+    _check_common(steps, lr, method, snapshot_every)
+    if not (isinstance(lr_end, (int, float)) and 0 < lr_end <= 1):
+        raise ValueError(f"lr_end must lie in (0, 1], got {lr_end!r}")
+    if not isinstance(camera_start, Camera):
+        raise ValueError(f"camera_start must be a Camera, got {type(camera_start).__name__}")
+    if camera_start.orthographic:
+        raise ValueError("fit_camera needs a perspective camera_start")
+    if reference_camera is not None and not isinstance(reference_camera, Camera):
+        raise ValueError(f"reference_camera must be a Camera or None, got {type(reference_camera).__name__}")
+    if not isinstance(mesh, Mesh):
+        raise ValueError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    dtype, device = mesh.verts.dtype, mesh.verts.device
+    ref = torch.as_tensor(reference_image).to(dtype=dtype, device=device)
+    H, W = camera_start.height, camera_start.width
+    if ref.dim() == 2:
+        if face_colors is not None:
+            raise ValueError("a silhouette reference (H, W) takes no face_colors")
+    elif ref.dim() == 3:
+        if face_colors is None:
+            raise ValueError("a colour reference (H, W, C) needs face_colors (F, C)")
+    else:
+        raise ValueError(f"reference_image must be (H, W) or (H, W, C), got shape {tuple(ref.shape)}")
+    if tuple(ref.shape[:2]) != (H, W):
+        raise ValueError(f"reference_image must be {H}x{W} like camera_start, got {tuple(ref.shape[:2])}")
+    if not torch.isfinite(ref).all():
+        raise ValueError("reference_image contains NaN or inf")
+    if ref.dim() == 2 and (ref.min() < 0 or ref.max() > 1):
+        raise ValueError("a silhouette reference must hold values in [0, 1]")
+    tgt = torch.as_tensor(target, dtype=dtype, device=device)
+    R0, t0 = camera_start.R.detach().to(dtype), camera_start.t.detach().to(dtype)
+    if lr_position is None:
+        lr_position = lr * float((camera_start.eye.detach().to(dtype) - tgt).norm())
+    omega = torch.zeros(3, dtype=dtype, device=device, requires_grad=True)   # world-frame orbit about target
+    shift = torch.zeros(3, dtype=dtype, device=device, requires_grad=True)   # camera-frame translation
+    opt = torch.optim.Adam([{"params": [omega], "lr": lr}, {"params": [shift], "lr": lr_position}])
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_end ** (1 / max(steps, 1)))
+    sigmas = _schedule(sigma, sigma_end, steps)
+    K = camera_start.K.detach().to(dtype)
+
+    def current():
+        Q = axis_angle_to_matrix(omega)                                     # x ↦ target + Q (x - target), then the start camera
+        R = R0 @ Q
+        return Camera(K, R, R0 @ (tgt - Q @ tgt) + t0 + shift, W, H, camera_start.near, camera_start.far)
+
+    history = FitHistory(metrics={"rotation_deg": [], "center_pct": []} if reference_camera is not None else {})
+    bar = _progress(steps, progress, f"fit_camera ({method})")
+    for step in range(steps + 1):
+        cam = current()
+        if reference_camera is not None:
+            history.metrics["rotation_deg"].append(rotation_error(cam.R, reference_camera.R))
+            history.metrics["center_pct"].append(center_error(cam, reference_camera, target))
+        if step == steps:
+            if _snap_due(step, steps, snapshot_every):
+                with torch.no_grad():
+                    history.snapshot_steps.append(step)
+                    history.snapshots.append(_render_for_camera(mesh, cam, method, sigmas[-1], face_colors,
+                                                                background).detach().clone())
+            break
+        image = _render_for_camera(mesh, cam, method, sigmas[step], face_colors, background)
+        if _snap_due(step, steps, snapshot_every):
+            history.snapshot_steps.append(step)
+            history.snapshots.append(image.detach().clone())
+        if ref.dim() == 2:
+            loss = losses.silhouette_iou_loss(image.clamp(0, 1), ref)
+        else:
+            loss = losses.l2_loss(image, ref)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        history.loss.append(float(loss.detach()))
+        bar.update(1)
+        bar.set_postfix(loss=f"{history.loss[-1]:.4f}")
+    bar.close()
+    final = current()
+    final = Camera(final.K.detach(), final.R.detach(), final.t.detach(), W, H, final.near, final.far)
+    if reference_camera is None:
+        return CameraFit(final, history)
+    return CameraFit(final, history, rotation_error(final.R, reference_camera.R),
+                     center_error(final, reference_camera, target))
