@@ -76,7 +76,7 @@ def test_gradients_are_finite_and_match_autograd_at_zero_and_the_knee():
 # --------------------------------------------------------------------------------------------- PNG output
 
 def test_png_stores_the_srgb_encoding_of_a_linear_image(tmp_path):
-    from course.render import _save_png
+    from course.render_cli import _save_png
     image = torch.tensor([[[0.5, 0.0, 1.0], [0.25, 0.002, 2.0]]], dtype=D)   # (1, 2, 3), 2.0 clamps to 1
     _save_png(image, str(tmp_path / "a.png"))
     with Image.open(tmp_path / "a.png") as img:
@@ -147,7 +147,8 @@ def test_render_returns_linear_values_and_only_the_png_is_encoded(tmp_path):
     from course.camera import Camera
     from course.mesh import Mesh
     from course.models import plane
-    from course.render import RenderSettings, Scene, _save_png, render
+    from course.render import RenderSettings, Scene, render
+    from course.render_cli import _save_png
     square = plane(size=2.0, dtype=D)
     square = Mesh(square.verts, square.faces, uvs=square.uvs, texture=torch.full((4, 4, 3), 0.5, dtype=D))
     camera = Camera.look_at((0.0, 2.0, 0.001), (0.0, 0.0, 0.0), fov_y=30, width=8, height=8).to(dtype=D)
