@@ -45,9 +45,10 @@ def _edges(prob, p) -> "_Edges":
     xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, cull)       # (T, 3, 2), (T,)
     T = xy.shape[0]
     ids = torch.full((T, 3), -1, dtype=torch.int64, device=xy.device)
-    # the faces that were not clipped come first, in order, with their own corners
-    whole = _whole_count(face)
-    ids[:whole] = weld[prob.faces[face[:whole]]]
+    # a triangle of a face the near plane did not cut has the face's own corners (clipped ones keep -1)
+    z = _camera_space(mesh.verts, cam)[:, 2]
+    whole = (z[prob.faces[face]].amin(1) >= cam.near).nonzero().squeeze(1)
+    ids[whole] = weld[prob.faces[face[whole]]]
     a, b, c = xy, xy.roll(-1, 1), xy.roll(-2, 1)                            # edge k: corner k → k+1
     va, vb = ids, ids.roll(-1, 1)
     d = (b - a).detach()
@@ -190,14 +191,6 @@ def _back_faces_hidden(prob, weld) -> bool:
     vol = (v[:, 0] * torch.linalg.cross(v[:, 1], v[:, 2])).sum(1) / 6
     piece = torch.unique(label[faces[:, 0]], return_inverse=True)[1]
     return bool((torch.zeros(int(piece.max()) + 1, dtype=vol.dtype).index_add(0, piece, vol) > 0).all())
-
-
-def _whole_count(face):
-    """_screen_faces lists the unclipped faces first, in increasing id order, then the clipped pieces."""
-    if face.numel() < 2:
-        return face.numel()
-    down = (face[1:] <= face[:-1]).nonzero()
-    return int(down[0]) + 1 if down.numel() else face.numel()
 
 
 def _weld(verts):

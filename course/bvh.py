@@ -318,12 +318,7 @@ class BVH:
         # box tests in float64 whatever the rays' dtype: the boxes' planes centre ± half are then exact
         ob, db = o.double(), d.double()
         inv = 1 / db                                                        # ±inf where a component is 0
-        start, size, beam, width = _packets(ob, db, inv, t_lo.double(), t_hi.double(), packet, self._diag)
-        alone = start[size == 1]                                            # incoherent rays: one by one
-        coherent = (size > 1).nonzero().squeeze(1)
-        start, size = start.index_select(0, coherent), size.index_select(0, coherent)
-        beam = [b.index_select(0, coherent) for b in beam]
-        width = [w.index_select(0, coherent) for w in width]
+        start, size, beam, width, alone = _packets(ob, db, inv, t_lo.double(), t_hi.double(), packet, self._diag)
         G = start.numel()
         # every ray is also a packet of its own, G + r: a packet splits into them at a node smaller than its beam
         rays = _beam(ob, ob, inv, inv, t_lo.double(), t_hi.double())
@@ -422,14 +417,14 @@ def _beam(omin, omax, ilo, ihi, t_lo, t_hi):
 
 
 def _packets(o, d, inv, t_lo, t_hi, size, diag):
-    """Group N rays into packets of up to ``size`` consecutive rays; a group whose rays are not coherent (unit
+    """Group N rays into packets of up to ``size`` consecutive rays. A group whose rays are not coherent (unit
     directions more than ``PACKET_SPREAD`` apart in some component, or origins more than ``PACKET_SPREAD``
-    times the scene's diagonal apart) is split into packets of one ray.
+    times the scene's diagonal apart), or that holds a single ray, is left to the per-ray traversal.
 
-    Returns start (G,), size (G,) (the packet's rays are start, ..., start + size - 1), the beams
-    (``_beam``: the packet's origin box, its interval of inverse directions and its widest segment) and the
-    beam's width (G,) at t = 0 and its growth per unit t (G,): the largest spread of the origins and of the
-    directions over the three axes.
+    Returns start (G,), size (G,) of the packets (the rays start, ..., start + size - 1), their beams
+    (``_beam``: the origin box, the interval of inverse directions and the widest segment), the beam's width
+    (G,) at t = 0 and its growth per unit t (G,) (the largest spread of the origins and of the directions over
+    the three axes), and the rays (K,) left alone.
     """
     n, dev = o.shape[0], o.device
     g = torch.arange(n, device=dev) // size                                # group of each ray
@@ -443,23 +438,17 @@ def _packets(o, d, inv, t_lo, t_hi, size, diag):
 
     u = d / d.norm(dim=1, keepdim=True).clamp_min(torch.finfo(d.dtype).tiny)
     omin, omax = reduce(o, "amin"), reduce(o, "amax")
-    coherent = (((reduce(u, "amax") - reduce(u, "amin")).amax(1) <= PACKET_SPREAD)
-                & ((omax - omin).amax(1) <= PACKET_SPREAD * diag))
     start = torch.arange(G, device=dev) * size
     count = (n - start).clamp(max=size)
-    single = (~coherent).index_select(0, g).nonzero().squeeze(1)            # rays of incoherent groups
-    keep = coherent.nonzero().squeeze(1)
-    start = torch.cat([start.index_select(0, keep), single])
-    count = torch.cat([count.index_select(0, keep), torch.ones_like(single)])
-    # the beams of the final packets
-    g = torch.repeat_interleave(torch.arange(start.numel(), device=dev), count)   # packet of each ray
-    G = start.numel()
-    rays = torch.repeat_interleave(start, count) + _ranks(count)
-    o, inv, t_lo, t_hi = o[rays], inv[rays], t_lo[rays], t_hi[rays]
-    omin, omax = reduce(o, "amin"), reduce(o, "amax")
-    width = ((omax - omin).amax(1), (reduce(d[rays], "amax") - reduce(d[rays], "amin")).amax(1))
-    return start, count, _beam(omin, omax, reduce(inv, "amin"), reduce(inv, "amax"), reduce(t_lo, "amin"),
-                               reduce(t_hi, "amax")), width
+    packed = (((reduce(u, "amax") - reduce(u, "amin")).amax(1) <= PACKET_SPREAD)
+              & ((omax - omin).amax(1) <= PACKET_SPREAD * diag) & (count > 1))
+    alone = (~packed).index_select(0, g).nonzero().squeeze(1)
+    keep = packed.nonzero().squeeze(1)
+    pick = lambda x: x.index_select(0, keep)
+    width = (pick((omax - omin).amax(1)), pick((reduce(d, "amax") - reduce(d, "amin")).amax(1)))
+    beam = _beam(pick(omin), pick(omax), pick(reduce(inv, "amin")), pick(reduce(inv, "amax")),
+                 pick(reduce(t_lo, "amin")), pick(reduce(t_hi, "amax")))
+    return pick(start), pick(count), beam, width, alone
 
 
 def _beam_box(beam, centre, half, single: bool = False):

@@ -122,10 +122,6 @@ class _Mesh:
         self.verts, self.faces = verts, faces
 
 
-def _grads(p, names):
-    return tuple(p[n].grad if p[n].grad is not None else torch.zeros_like(p[n]) for n in names)
-
-
 # -------------------------------------------------------------------------------------- exact
 
 def exact_gradient(prob: _Problem, names):

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from course.camera import Camera
-from course.mesh import Mesh, join_meshes
+from course.mesh import Mesh
 from course.models import cube, plane
 from course.render import RenderSettings, Scene, render
 from course.shading import AmbientLight, DirectionalLight, PointLight

@@ -265,7 +265,7 @@ def measure_scene(scene: dict, weights_kind: str, specs=None, repeat: int = REPE
     args = (scene["mesh"], scene["camera"], scene["colors"], w)
     common = dict(model=scene["model"], background=scene["background"], wrt=scene["wrt"])
     ref, exact_ms = _timed(lambda: image_gradient(*args, method="exact", **common), repeat)
-    subset, mask = None, None
+    subset = None
     if "verts" in scene["wrt"] and scene["mesh"].verts.shape[0] > FD_ALL_VERTICES:
         subset = _fd_vertices(ref[scene["wrt"].index("verts")], fd_vertices)
     rows = []
