@@ -23,7 +23,11 @@ Antialiasing (lecture 05) is a setting too: ``antialias="supersample"`` shades k
 and box-filters them; ``"adaptive"`` does so only in the pixels a discontinuity touches (silhouettes,
 occlusion, intersections, material changes; every edge under flat shading), and skips the samples entirely
 when no pixel needs them. Textures are filtered by mipmaps (``texture_filter="trilinear"``), which
-supersampling alone does not replace.
+supersampling alone does not replace. Shadows (lectures 06-07) come from shadow maps or shadow rays
+(``shadows="map"`` / ``"rays"``), and differentiable visibility (lecture 08) from ``visibility="nmr"`` (the
+same image with NMR's gradient) or ``"soft"`` (soft rasterization of per-vertex or per-face colours).
+The scene helpers ``frame_camera`` and ``default_lights`` live in ``course.framing``; the command line in
+``course.render_cli``.
 """
 from __future__ import annotations
 
