@@ -27,9 +27,16 @@ seen by the start camera, then shifted by ``s`` in camera space:
 camera about the object (the silhouette changes shape but stays put), and ``s`` moves the image; with
 the rotation about the camera's own centre instead (``R_start exp([ω]ₓ)``, centre free) a silhouette fit
 from 30° away stalls in a local minimum that re-centres the image by turning the camera in place
-(measured: the error grew from 30° to 35°). The loss is the IoU loss on a silhouette reference (H, W) or the L2 loss on a colour reference
-(H, W, C), rendered by soft rasterization or NMR. Errors are the geodesic rotation angle in degrees and
+(measured: the error grew from 30° to 35°). The loss is the IoU loss on a silhouette reference (H, W) or the
+L2 loss on a colour reference (H, W, C). Errors are the geodesic rotation angle in degrees and
 ``|c - c_ref| / |c_ref - target|`` in percent of the reference's viewing distance.
+
+Five gradients drive the same loop (``CAMERA_METHODS``): soft rasterization and NMR (lecture 08), the hard
+rasterizer with plain autograd (zero: the camera never moves), and lecture 09's boundary integral of the
+box-filtered image, exactly (``"reynolds"``) or by ``"edge_sampling"``. ``camera_problem()`` builds the
+comparison of lecture 10: the teapot, shaded by a light fixed in the world (``shaded_face_colors``: flat
+colours that do not depend on the camera), a reference camera, and a start 30° away about the world's
+vertical axis.
 """
 from __future__ import annotations
 
@@ -46,8 +53,8 @@ from .raster import rasterize
 from .soft import nmr_rasterize, soft_rasterize
 
 __all__ = ["FitHistory", "SilhouetteFit", "CameraFit", "circle_views", "sphere_views", "hard_silhouettes",
-           "held_out_iou", "fit_silhouettes", "fit_mesh_from_silhouettes", "fit_camera", "rotation_error",
-           "center_error"]
+           "held_out_iou", "fit_silhouettes", "fit_mesh_from_silhouettes", "CAMERA_METHODS", "shaded_face_colors",
+           "camera_problem", "fit_camera", "rotation_error", "center_error", "self_intersections"]
 
 _METHODS = ("soft", "nmr")
 
@@ -141,6 +148,34 @@ def held_out_iou(mesh, target_mesh, cameras) -> torch.Tensor:
     return losses.iou(hard_silhouettes(mesh, cameras), hard_silhouettes(target_mesh, cameras).to(mesh.verts.dtype))
 
 
+def self_intersections(mesh) -> torch.Tensor:
+    """(K, 2) pairs of faces (f < g) of ``mesh`` that cross each other and share no vertex position: where a
+    fit without a regulariser has folded through itself.
+
+    Candidates come from ``antialias._intersecting_faces`` (a grid, then each face having corners on both
+    sides of the other's plane, conservative); a pair counts when an edge of one, as a segment, passes
+    through the other (the watertight ray-triangle test with the edge as the ray, 0 <= t <= 1).
+    """
+    from .antialias import _intersecting_faces
+    from .boundary import _weld
+    from .intersect import intersect_triangles
+    if not isinstance(mesh, Mesh):
+        raise ValueError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    verts, faces = mesh.verts.detach(), mesh.faces
+    f, g = _intersecting_faces(verts, faces, _weld(verts))
+    if f.numel() == 0:
+        return torch.zeros(0, 2, dtype=torch.int64, device=faces.device)
+    crossing = torch.zeros(f.shape, dtype=torch.bool, device=faces.device)
+    for a, b in ((f, g), (g, f)):                                          # edges of a through triangle b
+        tri = verts[faces[b]]
+        for k in range(3):
+            p, q = verts[faces[a, k]], verts[faces[a, (k + 1) % 3]]
+            t, _, hit = intersect_triangles(p, q - p, tri)
+            crossing |= hit & (t >= 0) & (t <= 1)
+    pairs = torch.stack([torch.minimum(f, g), torch.maximum(f, g)], 1)[crossing]
+    return torch.unique(pairs, dim=0)
+
+
 # ------------------------------------------------------------------------------------------ helpers
 
 def _progress(total, progress, desc):
@@ -186,7 +221,8 @@ def _snap_due(step, steps, snapshot_every):
 
 def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "soft", lr: float = 0.01,
                     smoothness: float = 0.0005, laplacian: float = 0.0, edge_length: float = 0.0,
-                    sigma: float = 3e-4, seed: int = 0, start=None, subdivisions: int = 3,
+                    sigma: float = 3e-4, sigma_end: float | None = 3e-5, lr_end: float = 1.0,
+                    seed: int = 0, start=None, subdivisions: int = 3,
                     radius: float = 0.5, held_out=None, snapshot_every: int | None = 10,
                     progress: bool = True) -> SilhouetteFit:
     """Deform a sphere so that its silhouettes from ``cameras`` match those of ``target_mesh``.
@@ -243,6 +279,8 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
     targets = hard_silhouettes(target_mesh, cameras).to(dtype)              # (N, H, W)
     offset = torch.zeros_like(base, requires_grad=True)
     opt = torch.optim.Adam([offset], lr=lr)
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_end ** (1 / max(steps, 1)))
+    sigmas = _schedule(sigma, sigma_end, steps)
     history = FitHistory(metrics={"iou_loss": []})
     start_iou = held_out_iou(Mesh(base, faces), target_mesh, held_out).mean()
 
@@ -255,7 +293,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         if step == steps:
             break
         mesh = Mesh(verts, faces)
-        pred = torch.stack([_silhouette(mesh, c, method, sigma) for c in cameras])   # (N, H, W)
+        pred = torch.stack([_silhouette(mesh, c, method, sigmas[step]) for c in cameras])   # (N, H, W)
         sil = losses.silhouette_iou_loss(pred.clamp(0, 1), targets, reduction="mean")
         loss = sil
         if smoothness:
@@ -267,6 +305,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         opt.zero_grad()
         loss.backward()
         opt.step()
+        sched.step()
         history.loss.append(float(loss.detach()))
         history.metrics["iou_loss"].append(float(sil.detach()))
         bar.update(1)
@@ -306,22 +345,107 @@ def center_error(camera, reference, target=(0.0, 0.0, 0.0)) -> float:
     return 100 * float((c - c_ref).norm() / (c_ref - tgt).norm())
 
 
-def _render_for_camera(mesh, camera, method, sigma, face_colors, background):
+CAMERA_METHODS = ("soft", "nmr", "hard", "reynolds", "edge_sampling")
+
+
+def shaded_face_colors(mesh, light=(0.4, 0.8, 0.45), albedo=(0.85, 0.6, 0.35), ambient: float = 0.15) -> torch.Tensor:
+    """(F, 3) flat Lambert colours ``albedo (ambient + (1 - ambient) max(0, n·l))`` under a directional light
+    fixed in the world (``light`` points toward it): a shaded image whose colours do not depend on the camera,
+    so every visibility method of lecture 09 can differentiate it."""
+    n = mesh.face_normals().detach()
+    d = torch.as_tensor(light, dtype=n.dtype, device=n.device)
+    lam = (n @ (d / d.norm())).clamp(min=0)
+    a = torch.as_tensor(albedo, dtype=n.dtype, device=n.device)
+    return a * (ambient + (1 - ambient) * lam)[:, None]
+
+
+def camera_problem(mesh=None, *, size: int = 64, degrees: float = 30.0, axis=(0.0, 1.0, 0.0),
+                   eye=(1.5, 1.0, 2.5), fov_y: float = 40.0, shaded: bool = True):
+    """The camera fit of lecture 10 and ``bench fit``: (mesh, face_colors, reference_camera, start_camera,
+    reference_image).
+
+    mesh: None for ``models.teapot(4)`` in float64. The reference camera sits at ``eye`` looking at the
+    origin; the start is the reference camera orbited by ``degrees`` about ``axis`` through the origin (world
+    +y by default, which is not the view axis), looking at the origin again. shaded: the reference is the
+    exact box-filtered image (``coverage.exact_coverage``) of ``shaded_face_colors`` on a black background,
+    (H, W, 3); otherwise its silhouette, (H, W), and face_colors is None.
+    """
+    from .coverage import exact_coverage
+    if mesh is None:
+        mesh = models.teapot(4, dtype=torch.float64)
+    dtype, device = mesh.verts.dtype, mesh.verts.device
+    ref_cam = Camera.look_at(eye, fov_y=fov_y, width=size, height=size, dtype=dtype, device=device)
+    a = torch.as_tensor(axis, dtype=dtype, device=device)
+    Q = axis_angle_to_matrix(a / a.norm() * math.radians(degrees))
+    start = Camera.look_at(Q @ ref_cam.eye, fov_y=fov_y, width=size, height=size, dtype=dtype, device=device)
+    colors = shaded_face_colors(mesh) if shaded else torch.ones(mesh.faces.shape[0], 3, dtype=dtype, device=device)
+    with torch.no_grad():
+        image = exact_coverage(mesh, ref_cam, colors, (0.0, 0.0, 0.0))
+    if not shaded:
+        return mesh, None, ref_cam, start, image[..., 0].clamp(0, 1)          # rounding: 1 + 1e-15
+    return mesh, colors, ref_cam, start, image
+
+
+def _render_for_camera(mesh, camera, method, sigma, face_colors, background, gamma=1e-2):
+    """The image a method renders: soft, or the hard one (hard, NMR), or the box-filtered one (Reynolds, edge
+    sampling), whose gradient ``_boundary_backward`` supplies instead of autograd."""
+    if method in ("reynolds", "edge_sampling"):
+        from .coverage import exact_coverage
+        colors = face_colors if face_colors is not None else mesh.verts.new_ones(mesh.faces.shape[0], 3)
+        with torch.no_grad():
+            image = exact_coverage(mesh, _detached(camera), colors, _background3(background, mesh.verts))
+        return image if face_colors is not None else image[..., 0]
     if face_colors is None:
         if method == "soft":
             return soft_rasterize(mesh, camera, mode="silhouette", sigma=sigma, cull_backfaces=False)
+        if method == "hard":
+            return rasterize(mesh, camera, cull_backfaces=False).mask.to(mesh.verts.dtype)
         return nmr_rasterize(mesh, camera, cull_backfaces=False)
     if method == "soft":
-        return soft_rasterize(mesh, camera, mode="color", sigma=sigma, gamma=1e-4, face_colors=face_colors,
+        return soft_rasterize(mesh, camera, mode="color", sigma=sigma, gamma=gamma, face_colors=face_colors,
                               background=background, cull_backfaces=True)
+    if method == "hard":
+        with torch.no_grad():
+            return nmr_rasterize(mesh, _detached(camera), face_colors=face_colors, background=background,
+                                 cull_backfaces=True)
     return nmr_rasterize(mesh, camera, face_colors=face_colors, background=background, cull_backfaces=True)
+
+
+def _detached(camera):
+    return Camera(camera.K.detach(), camera.R.detach(), camera.t.detach(), camera.width, camera.height,
+                  camera.near, camera.far, camera.orthographic)
+
+
+def _background3(background, like):
+    bg = torch.as_tensor(background, dtype=like.dtype, device=like.device)
+    return bg.expand(3) if bg.dim() == 0 else bg
+
+
+def _boundary_backward(loss_of, image, mesh, camera, method, face_colors, background, generator, samples):
+    """Backpropagate ``loss_of(image)`` into the camera's R and t by the boundary integral of lecture 09
+    (``visibility.image_gradient``, method ``"reynolds"`` or ``"edge_sampling"``): dL/dimage are the weights,
+    the boundary term turns them into dL/dR and dL/dt, and autograd carries those on into the pose."""
+    from .visibility import image_gradient
+    leaf = image.detach().requires_grad_(True)
+    loss = loss_of(leaf)
+    (weights,) = torch.autograd.grad(loss, leaf)
+    colors = face_colors if face_colors is not None else mesh.verts.new_ones(mesh.faces.shape[0], 3)
+    if face_colors is None:                                                  # a silhouette: channel 0 of (H, W, 3)
+        weights = torch.stack([weights, torch.zeros_like(weights), torch.zeros_like(weights)], dim=-1)
+    options = {"generator": generator, "samples": samples} if method == "edge_sampling" else {}
+    gR, gt = image_gradient(mesh, _detached(camera), colors, weights, method=method,
+                            background=_background3(background, mesh.verts), wrt=("R", "t"), **options)
+    pairs = [(x, g.to(x.dtype)) for x, g in ((camera.R, gR), (camera.t, gt)) if x.requires_grad]
+    if pairs:
+        torch.autograd.backward([x for x, _ in pairs], [g for _, g in pairs])
+    return loss.detach()
 
 
 def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method: str = "soft", lr: float = 0.02,
                lr_position: float | None = None, sigma: float = 1e-3, sigma_end: float | None = 3e-5,
-               lr_end: float = 0.1, face_colors=None, background=0.0,
-               reference_camera=None, target=(0.0, 0.0, 0.0), seed: int = 0, snapshot_every: int | None = 10,
-               progress: bool = True) -> CameraFit:
+               lr_end: float = 0.1, gamma: float = 1e-2, face_colors=None, background=0.0,
+               reference_camera=None, target=(0.0, 0.0, 0.0), samples: int = 4000, seed: int = 0,
+               snapshot_every: int | None = 10, progress: bool = True) -> CameraFit:
     """Recover a camera pose from one reference image of a known mesh, intrinsics known.
 
     Args:
@@ -329,24 +453,39 @@ def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method:
         reference_image: (H, W) silhouette in [0, 1] (IoU loss) or (H, W, C) colours (L2 loss, needs
             ``face_colors``), the size of ``camera_start``'s image.
         camera_start: the initial ``Camera``; K, image size, near and far are kept.
-        steps: Adam steps. method: ``"soft"`` or ``"nmr"``.
+        steps: Adam steps. method: one of ``CAMERA_METHODS``, the gradient that drives the pose:
+            ``"soft"`` (soft rasterization, depth softmax ``gamma`` for colours), ``"nmr"`` (hard image, Kato
+            et al.'s approximate gradient), ``"hard"`` (the hard image and autograd: zero gradient, the pose
+            never moves; there for comparison), ``"reynolds"`` / ``"edge_sampling"`` (the box-filtered image
+            ``coverage.exact_coverage`` and its gradient by lecture 09's boundary integral, exact or from
+            ``samples`` random edge points drawn with ``seed``; faces are flat-coloured, so a colour reference
+            needs face colours that do not depend on the camera, e.g. ``shaded_face_colors``).
         lr: Adam's learning rate on the axis-angle ω (radians), the orbit about ``target``.
         lr_position: Adam's learning rate on the camera-space shift s (world units); None: ``lr`` times
             the start's distance to ``target``.
         sigma, sigma_end: soft rasterization's sharpness (NDC units), annealed geometrically from ``sigma`` to
             ``sigma_end`` over the steps (coarse to fine: a blurred silhouette pulls from far away, a sharp one
-            pins the pose); ``sigma_end=None`` keeps ``sigma``. Unused by NMR.
+            pins the pose); ``sigma_end=None`` keeps ``sigma``. Used by soft rasterization only.
+        gamma: soft rasterization's depth-softmax temperature for a colour reference. 1e-2, not the 1e-4 of
+            lecture 08: at tiny γ a face's colour outweighs the background far outside its edge (the
+            fattening), the image is too bright around the object and the fit stalls (measured: 36° error
+            left after 150 steps at γ = 1e-4 on ``camera_problem()``, 0.4° at γ = 1e-2).
         lr_end: both learning rates decay exponentially to this fraction of their start by the last step.
         face_colors: (F, C) flat colours for a colour
             reference (None: silhouette). background: the colour reference's background.
         reference_camera: the true camera, if known: the errors are then recorded per step and at the end.
         target: (3,) the orbit's pivot, and the point the centre error's distance is measured to.
-        seed: accepted for a uniform interface; the loop itself draws no random numbers.
+        samples: edge sampling's points per step. seed: seeds edge sampling (the other methods draw no
+            random numbers).
         snapshot_every: keep the rendered image every this many steps (and the last); None: none.
 
     Returns a ``CameraFit``; ``history.loss`` has ``steps`` entries.
     """
-    _check_common(steps, lr, method, snapshot_every)
+    _check_common(steps, lr, "soft", snapshot_every)
+    if method not in CAMERA_METHODS:
+        raise ValueError(f"method must be one of {CAMERA_METHODS}, got {method!r}")
+    if not (isinstance(samples, int) and samples >= 1):
+        raise ValueError(f"samples must be a positive integer, got {samples!r}")
     if not (isinstance(lr_end, (int, float)) and 0 < lr_end <= 1):
         raise ValueError(f"lr_end must lie in (0, 1], got {lr_end!r}")
     if not isinstance(camera_start, Camera):
@@ -390,6 +529,13 @@ def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method:
         R = R0 @ Q
         return Camera(K, R, R0 @ (tgt - Q @ tgt) + t0 + shift, W, H, camera_start.near, camera_start.far)
 
+    gen = torch.Generator(device="cpu").manual_seed(int(seed))               # edge sampling's points
+
+    def loss_of(image):
+        if ref.dim() == 2:
+            return losses.silhouette_iou_loss(image.clamp(0, 1), ref)
+        return losses.l2_loss(image, ref)
+
     history = FitHistory(metrics={"rotation_deg": [], "center_pct": []} if reference_camera is not None else {})
     bar = _progress(steps, progress, f"fit_camera ({method})")
     for step in range(steps + 1):
@@ -402,18 +548,19 @@ def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method:
                 with torch.no_grad():
                     history.snapshot_steps.append(step)
                     history.snapshots.append(_render_for_camera(mesh, cam, method, sigmas[-1], face_colors,
-                                                                background).detach().clone())
+                                                                background, gamma).detach().clone())
             break
-        image = _render_for_camera(mesh, cam, method, sigmas[step], face_colors, background)
+        image = _render_for_camera(mesh, cam, method, sigmas[step], face_colors, background, gamma)
         if _snap_due(step, steps, snapshot_every):
             history.snapshot_steps.append(step)
             history.snapshots.append(image.detach().clone())
-        if ref.dim() == 2:
-            loss = losses.silhouette_iou_loss(image.clamp(0, 1), ref)
-        else:
-            loss = losses.l2_loss(image, ref)
         opt.zero_grad()
-        loss.backward()
+        if method in ("reynolds", "edge_sampling"):
+            loss = _boundary_backward(loss_of, image, mesh, cam, method, face_colors, background, gen, samples)
+        else:
+            loss = loss_of(image)
+            if loss.requires_grad:                                          # the hard image has no gradient:
+                loss.backward()                                             # Adam sees zeros and stays put
         opt.step()
         sched.step()
         history.loss.append(float(loss.detach()))
