@@ -16,6 +16,8 @@ only where another edge or an intersection line crosses it, so the pieces are cu
 point per piece decides. Lines where two faces pass through each other (``antialias._intersecting_faces``)
 are boundaries too: there the line n_f = n_g (the faces' nearness planes on screen) moves at
 ``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The far plane is not a boundary here (faces are taken whole up to it).
+Vertices count as one where their positions agree to 1e-9 of the mesh's size (``_weld``): seam copies of a
+point evaluated twice (the teapot's poles) differ in the last bits, and must not look like an open crack.
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from .soft import _screen_faces
 __all__ = ["boundary_points", "boundary_gradient"]
 
 OFFSET = 1e-6            # pixels: how far beside an edge the z-buffer is asked what is visible
+CUT_SLACK = 1e-9         # of an edge's length: how far past its ends it still cuts the edges it meets
 
 
 def _edges(prob, p) -> "_Edges":
@@ -128,9 +131,11 @@ def _with_crossings(edges, prob, p, weld):
     pair (f, g), the segment where f meets g's plane, projected; the image jumps along the part that lies in
     g and is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
     verts = prob.params["verts"]
-    cand = torch.unique(edges.face)                                         # faces that can show (in front of
-    f, g = _intersecting_faces(verts.double(), prob.faces[cand], weld)      # the camera; front faces when
-    if f.numel() == 0:                                                      # back ones never show)
+    # faces that can show (in front of the camera; front faces when back ones never show): the faces of
+    # the edges and their twins (a face whose every edge is shared may own none of the merged copies)
+    cand = torch.unique(torch.cat([edges.face, edges.twin[edges.twin >= 0]]))
+    f, g = _intersecting_faces(verts.double(), prob.faces[cand], weld)
+    if f.numel() == 0:
         return edges
     f, g = cand[f], cand[g]
     seg, ok = _crossing_segments(verts.double(), prob.faces, f, g)          # (N, 3, 2, 3), (N, 3)
@@ -193,10 +198,51 @@ def _back_faces_hidden(prob, weld) -> bool:
     return bool((torch.zeros(int(piece.max()) + 1, dtype=vol.dtype).index_add(0, piece, vol) > 0).all())
 
 
-def _weld(verts):
-    """(V,) a canonical id per vertex position: vertices at the same place get the same id."""
-    _, inverse = torch.unique(verts.detach(), dim=0, return_inverse=True)
-    return inverse
+WELD_TOL = 1e-9          # relative to the mesh's extent: vertices this close are one position (``_weld``)
+
+
+def _weld(verts, tol: float = WELD_TOL):
+    """(V,) one id per vertex position: vertices at the same place, up to ``tol`` × the mesh's extent, get
+    the same id.
+
+    Exact equality is not enough: a mesh built by evaluating patches (the teapot) puts seam copies of one
+    point a few ulps apart, and two faces meeting there would look like an open crack, each edge a boundary
+    counted in full. Points are put in grid cells of size h = tol × extent, on 8 grids shifted by h/2 along
+    each axis: two points less than h/2 apart on every axis share a cell on at least one of them. The ids are
+    the connected groups of "shares a cell somewhere" (so points up to about 2h apart may merge, and chains
+    of them: h is far below any edge length)."""
+    v = verts.detach().double()
+    V = v.shape[0]
+    if V == 0:
+        return torch.zeros(0, dtype=torch.int64, device=verts.device)
+    lo = v.amin(0)
+    h = float((v.amax(0) - lo).amax()) * tol
+    if not 0 < h < math.inf:                                                # one point, or inf / NaN: exact
+        return torch.unique(v, dim=0, return_inverse=True)[1]
+    x = (v - lo) / h                                                        # (V, 3) in [0, 1/tol]
+    groups = []
+    for k in range(8):                                                      # shifts (0 or ½ per axis)
+        shift = torch.tensor([k & 1, (k >> 1) & 1, (k >> 2) & 1], dtype=x.dtype, device=x.device) / 2
+        groups.append(_cell_ids(torch.floor(x + shift).long()))
+    label = torch.arange(V, device=verts.device)                            # the smallest index in the group,
+    while True:                                                             # spread to a fixpoint
+        new = label
+        for g in groups:
+            new = torch.full_like(label, V).scatter_reduce(0, g, new, reduce="amin")[g]
+        if torch.equal(new, label):
+            break
+        label = new
+    return torch.unique(label, return_inverse=True)[1]
+
+
+def _cell_ids(cells):
+    """(V, 3) integer cells → (V,) ids, equal cells equal ids: ranks along each axis, then of the pairs
+    (1-D uniques; the keys stay below V², no overflow however fine the grid)."""
+    V = cells.shape[0]
+    key = torch.unique(cells[:, 0], return_inverse=True)[1]
+    for c in (1, 2):
+        key = torch.unique(key * V + torch.unique(cells[:, c], return_inverse=True)[1], return_inverse=True)[1]
+    return key
 
 
 def _pixel_segments(a, b, W, H):
@@ -253,8 +299,11 @@ def _split_at_crossings(a, b, s0, s1, e, pixel):
     safe = torch.where(ok, den, torch.ones_like(den))
     s = (rx * djy - ry * djx) / safe                                        # along i
     u = (rx * diy - ry * dix) / safe                                        # along j
-    cut = ok & (s > s0.index_select(0, i)) & (s < s1.index_select(0, i)) & (u >= s0.index_select(0, j)) & \
-        (u <= s1.index_select(0, j))
+    # j may end exactly on i (an intersection line ends on the edges of its faces, where an edge passes
+    # under the other face): rounding puts u a few ulps outside j, so j is taken a little longer. A cut
+    # too many only splits a piece that is visible all along anyway; one too few mixes two visibilities.
+    cut = ok & (s > s0.index_select(0, i)) & (s < s1.index_select(0, i)) & \
+        (u >= s0.index_select(0, j) - CUT_SLACK) & (u <= s1.index_select(0, j) + CUT_SLACK)
     piece = torch.cat([torch.arange(pixel.numel(), device=pixel.device)] * 2 + [i[cut]])
     t = torch.cat([s0, s1, s[cut]])
     order = torch.argsort(piece.double() * 4 + (t - s0[piece]) / (s1[piece] - s0[piece]).clamp_min(1e-300))
@@ -338,6 +387,12 @@ def boundary_points(prob, p, *, order=None, samples=None, generator=None):
     to length, weight = total length / samples. Returns edge data and per point: edge (N,), s (N,),
     weight (N,), pixel (N,).
     """
+    return _boundary_points(prob, p, order, samples, generator)[:5]
+
+
+def _boundary_points(prob, p, order, samples, generator):
+    """``boundary_points``, and per point how far (pixels) it lies from the nearer end of its piece of edge
+    (N,), inf for sampled points (no pieces): how close another edge can come to it (``_side_offset``)."""
     edges = _edges(prob, p)
     a, b = edges.a, edges.b
     W, H = prob.camera0.width, prob.camera0.height
@@ -352,6 +407,7 @@ def boundary_points(prob, p, *, order=None, samples=None, generator=None):
         s = ((s0 + s1) / 2)[:, None] + half[:, None] * x                   # (N, q)
         weight = (half * length[e])[:, None] * w
         q = x.numel()
+        gap = (torch.minimum(s - s0[:, None], s1[:, None] - s) * length[e][:, None]).reshape(-1)
         e, pix = e[:, None].expand(-1, q).reshape(-1), pix[:, None].expand(-1, q).reshape(-1)
         s, weight = s.reshape(-1), weight.reshape(-1)
     else:
@@ -359,8 +415,8 @@ def boundary_points(prob, p, *, order=None, samples=None, generator=None):
         if samples is None or int(samples) < 1:
             raise ValueError(f"samples must be a positive int, got {samples!r}")
         if float(total) == 0:
-            empty = torch.zeros(0, dtype=torch.int64, device=a.device)
-            return edges, empty, a.new_zeros(0).detach(), a.new_zeros(0).detach(), empty
+            empty, none = torch.zeros(0, dtype=torch.int64, device=a.device), a.new_zeros(0).detach()
+            return edges, empty, none, none, empty, none
         e = torch.multinomial(length / total, int(samples), replacement=True, generator=generator)
         s = torch.rand(int(samples), dtype=ad.dtype, generator=generator).to(ad.device)
         weight = torch.full_like(s, float(total) / int(samples))
@@ -369,14 +425,24 @@ def boundary_points(prob, p, *, order=None, samples=None, generator=None):
         inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
         e, s, weight = e[inside], s[inside], weight[inside]
         pix = (row * W + col)[inside].long()
-    return edges, e, s, weight, pix
+        gap = torch.full_like(s, math.inf)
+    return edges, e, s, weight, pix, gap
+
+
+def _side_offset(gap):
+    """How far beside an edge (pixels) to ask what is visible, for points ``gap`` (N,) pixels from the ends
+    of their pieces: ``OFFSET``, shrunk in proportion on pieces shorter than a pixel. A piece ends where
+    another edge crosses or meets it, and a face between the two can be a wedge as thin as ``gap`` × its
+    angle there: a fixed offset would step over it (into the face beyond) on the short pieces near a
+    vertex, so the offset keeps to ``OFFSET`` × gap, inside any wedge wider than 1e-6 rad."""
+    return OFFSET * gap.clamp(max=1.0)
 
 
 def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
     differentiated by autograd through the edges' screen positions (see the module docstring)."""
     p = prob.leaves(names)
-    edges, e, s, weight, pix = boundary_points(prob, p, order=order, samples=samples, generator=generator)
+    edges, e, s, weight, pix, gap = _boundary_points(prob, p, order, samples, generator)
     a, b, n, face, vid = edges.a, edges.b, edges.n, edges.face, edges.vid
     leaves = [p[k] for k in names]
     if e.numel() == 0:
@@ -384,8 +450,8 @@ def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     mesh, cam = prob.mesh(p), prob.camera(p)
     with torch.no_grad():
         x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
-        inside, outside = _visible_at(mesh, cam, torch.cat([x - OFFSET * n[e], x + OFFSET * n[e]]),
-                                      edges.culled).chunk(2)
+        step = _side_offset(gap)[:, None] * n[e]                            # beside the edge, either side
+        inside, outside = _visible_at(mesh, cam, torch.cat([x - step, x + step]), edges.culled).chunk(2)
         colors = p["colors"].detach()
         w = prob.weights.reshape(-1, 3)[pix]
         ends = vid[e]
