@@ -106,7 +106,7 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)):
     for v, name in ((eye, "eye"), (target, "target"), (up, "up")):
         _check_shape(v, (3,), name)
     forward = target - eye
-    if forward.norm() <= 1e-12 * max(1.0, float(eye.abs().max())):
+    if forward.norm() <= 1e-12 * max(1.0, float(eye.detach().abs().max())):
         raise ValueError("look_at: eye and target are the same point, the viewing direction is undefined")
     z = forward / forward.norm()                                            # camera +z: forward
     right = torch.linalg.cross(z, up)                                       # forward × up points right

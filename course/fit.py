@@ -201,6 +201,18 @@ def _silhouette(mesh, camera, method, sigma):
     return nmr_rasterize(mesh, camera, cull_backfaces=False)
 
 
+def start_verts(start, seed) -> tuple:
+    """(verts (V, 3), faces (F, 3)) of the Mesh ``start`` with a small seeded jitter (2e-3 of its radius about
+    the origin, uniform per coordinate): the starting shape of every silhouette fit, so runs with one seed are
+    identical and the symmetric sphere does not sit exactly on a tie."""
+    gen = torch.Generator(device="cpu").manual_seed(int(seed))
+    base = start.verts.detach()
+    scale = float(base.norm(dim=1).max())
+    jitter = (torch.rand(base.shape, generator=gen, dtype=torch.float64) - 0.5).to(dtype=base.dtype,
+                                                                                  device=base.device)
+    return base + 2e-3 * scale * jitter, start.faces
+
+
 def _schedule(start, end, steps):
     """steps + 1 values from start to end, geometrically (all ``start`` when end is None)."""
     for name, v in (("sigma", start), ("sigma_end", end)):
@@ -270,12 +282,8 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         if held_out is None:
             raise ValueError("non-square training images: pass held_out cameras")
 
-    gen = torch.Generator(device="cpu").manual_seed(int(seed))
-    base = start.verts.detach().to(dtype)
-    scale = float(base.norm(dim=1).max())
-    jitter = (torch.rand(base.shape, generator=gen, dtype=torch.float64) - 0.5).to(dtype=dtype, device=device)
-    base = base + 2e-3 * scale * jitter
-    faces = start.faces
+    base, faces = start_verts(start, seed)
+    base = base.to(dtype)
     targets = hard_silhouettes(target_mesh, cameras).to(dtype)              # (N, H, W)
     offset = torch.zeros_like(base, requires_grad=True)
     opt = torch.optim.Adam([offset], lr=lr)
