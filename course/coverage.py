@@ -162,14 +162,26 @@ def _pad(poly, width):
     return poly if extra <= 0 else torch.cat([poly, poly[:, -1:].expand(-1, extra, -1)], 1)
 
 
-def _clip_rows(poly, count, s, inside=None):
+def _clip_rows(poly, count, s, inside=None, tol=0.0):
     """``clip_polygon`` on N padded convex polygons at once, keeping the part where s >= 0.
 
     poly: (N, M, D) points (D = 2 on screen, 3 in camera space), slots past count repeating the last vertex;
     count: (N,); s: (N, M) the value at each vertex of a function affine along the edges; inside: optional
-    (N, M) bool decisions to use instead of ``s >= 0``. Returns (N, M', D) and the new counts (N,).
+    (N, M) bool decisions to use instead of ``s >= 0``; tol: an edge whose two ends have ``|s| <= tol`` lies
+    on the line. Returns (N, M', D) and the new counts (N,).
     Every vertex emits itself (if inside) and its edge's crossing (if the edge changes side); a cumulative sum
     gives each emitted point its output slot.
+
+    Why tol: a vertex that lies on the line in exact arithmetic (an earlier crossing on a line through the
+    same mesh vertex, a shared edge seen from both of its faces) has an s of rounding noise, ±1e-17. When
+    both ends of an edge are such vertices, their signs can differ, and the crossing ``t = s_p / (s_p - s_q)``
+    is noise / noise: a point anywhere on the edge whose derivative is a ratio of rounding errors, O(1) or
+    worse, left in a sliver of area 0 that autograd still differentiates (it moved the teapot's gradients by
+    O(1)). Such an edge is split at its start p instead, t = 0, with p's derivative; the complementary clip
+    (``-s``) splits it at the same point, so the two parts still tile the polygon, derivatives included.
+    An isolated vertex on the line keeps its noisy sign: its crossings (t near 0 or 1) are well conditioned
+    and lie on the right lines, which is what keeps a vertex where three lines meet (a symmetric mesh)
+    differentiable.
     """
     N, M, D = poly.shape
     k = torch.arange(M, device=poly.device)
@@ -178,9 +190,11 @@ def _clip_rows(poly, count, s, inside=None):
     ins = s >= 0 if inside is None else inside
     keep = real & ins
     cross = real & (ins != ins.gather(1, nxt))
+    on = s.detach().abs() <= tol
+    cross_at = cross & ~(on & on.gather(1, nxt))                            # not an edge along the line (t = 0)
     denom = s - s.gather(1, nxt)
-    denom = torch.where(cross & (denom != 0), denom, torch.ones_like(denom))   # guarded: no 0/0, even unused
-    t = torch.where(cross, s / denom, torch.zeros_like(s)).clamp(0, 1)
+    denom = torch.where(cross_at & (denom != 0), denom, torch.ones_like(denom))   # guarded: no 0/0, even unused
+    t = torch.where(cross_at, s / denom, torch.zeros_like(s)).clamp(0, 1)
     hit = poly + t[..., None] * (_take(poly, nxt) - poly)                   # (N, M, D) crossings
     cand = torch.stack([poly, hit], 2).reshape(N, 2 * M, D)
     emit = torch.stack([keep, cross], 2).reshape(N, 2 * M)
@@ -381,6 +395,17 @@ def _hide(pixel, face, face_id, geo, edge_ok, far, camera):
 TRUE = (0.0, 0.0, 1.0)   # a line that holds everywhere: a half-plane that is not there
 
 
+def _tol(dtype):
+    """Distances (pixels) below this are rounding: a vertex this close to a line is on it."""
+    return max(1e-12, 16 * torch.finfo(dtype).eps)
+
+
+def _distances(line, poly):
+    """Signed distances (N, M) of points (N, M, 2) to lines (N, 3); ``TRUE`` rows give huge values."""
+    norm = line[:, :2].norm(dim=-1).clamp(min=torch.finfo(line.dtype).tiny)
+    return _values(line[:, None], poly)[:, 0] / norm[:, None]
+
+
 def _square_piece(geo, plan, pixel, face, camera, dtype):
     """Each pair's piece f ∩ square ∩ {z <= far}, pixel-relative: (R, M, 2), counts (R,)."""
     W = camera.width
@@ -388,12 +413,12 @@ def _square_piece(geo, plan, pixel, face, camera, dtype):
     poly, count = (geo.xy[face] - corner[:, None]).to(dtype), geo.count[face]   # pixel-relative, then dtype
     for axis, sign in ((0, 1), (0, -1), (1, 1), (1, -1)):                   # u >= 0, u <= 1, v >= 0, v <= 1
         u = poly[..., axis]
-        poly, count = _clip_rows(poly, count, u if sign > 0 else 1 - u)
+        poly, count = _clip_rows(poly, count, u if sign > 0 else 1 - u, tol=_tol(dtype))
     far = plan.far[face]
     if bool(far.any()):
         line = (_local(geo.coef[face], corner) - corner.new_tensor([0.0, 0.0, _far_value(camera)])).to(dtype)
-        s = _values(line[:, None], poly)[:, 0]
-        poly, count = _clip_rows(poly, count, torch.where(far[:, None], s, torch.ones_like(s)))
+        s = _distances(line, poly)
+        poly, count = _clip_rows(poly, count, torch.where(far[:, None], s, torch.ones_like(s)), tol=_tol(dtype))
     return poly, count, corner
 
 
@@ -425,18 +450,23 @@ def _classify(poly, lines, g_poly, tol):
 
 def _subtract(poly, count, lines, tol):
     """Convex pieces (rows, M, 2) minus the convex regions given by lines (rows, 6, 3): the disjoint pieces
-    piece ∩ ¬H1, piece ∩ H1 ∩ ¬H2, ... Returns pieces, counts and the row each came from."""
+    piece ∩ ¬H1, piece ∩ H1 ∩ ¬H2, ... Returns pieces, counts and the row each came from.
+
+    The values are distances, so tol (pixels) tells an edge that lies on Hh's line (a shared edge of two
+    occluders, a crossing through a mesh vertex) from one that crosses it (``_clip_rows``)."""
     rows = torch.arange(poly.shape[0], device=poly.device)
     out = []
     for h in range(lines.shape[1]):
-        s = _values(lines[:, h:h + 1], poly)[:, 0]                          # (rows, M)
-        cut = ((s.detach() < 0) & (torch.arange(poly.shape[1], device=s.device) < count[:, None])).any(1)
+        s = _distances(lines[:, h], poly)                                   # (rows, M) signed distances
+        real = torch.arange(poly.shape[1], device=s.device) < count[:, None]
+        cut = ((s.detach() < 0) & real).any(1)
         if not bool(cut.any()):
             continue                                                        # nothing outside Hh: no piece
         i = cut.nonzero().squeeze(1)
-        o, oc = _clip_rows(poly[i], count[i], -s[i])                        # piece ∩ ¬Hh
+        inside = s[i].detach() >= 0
+        o, oc = _clip_rows(poly[i], count[i], -s[i], ~inside, tol)          # piece ∩ ¬Hh
         out.append((o, oc, rows[i]))
-        c, cc = _clip_rows(poly[i], count[i], s[i])                         # continue with piece ∩ Hh
+        c, cc = _clip_rows(poly[i], count[i], s[i], inside, tol)            # continue with piece ∩ Hh
         width = max(c.shape[1], poly.shape[1])
         poly = _pad(poly, width).index_copy(0, i, _pad(c, width))
         count = count.index_copy(0, i, cc)
@@ -459,7 +489,7 @@ def _chunk_pieces(geo, plan, lo, hi, camera, dtype):
     """The visible pieces of the pairs lo:hi of the plan (whole pixels). Returns poly, count, pair index."""
     pixel, face, size = plan.pixel[lo:hi], plan.face[lo:hi], plan.size[lo:hi]
     start = _groups(pixel)[0]
-    tol = max(1e-12, 16 * torch.finfo(dtype).eps)
+    tol = _tol(dtype)
     poly, count, corner = _square_piece(geo, plan, pixel, face, camera, dtype)
     poly, count, owner = _keep(poly, count, torch.arange(pixel.numel(), device=pixel.device), tol)
     corner64 = _corners(pixel, camera.width)

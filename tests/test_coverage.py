@@ -397,6 +397,72 @@ def test_gradients_finite_at_kinks():
     assert torch.isfinite(img).all() and torch.isfinite(gv).all()
 
 
+def _teapot_for_gradients():
+    """teapot(3) at 24 px: its lid fan, shared edges and the spout crossing the body at z = 0 put many piece
+    vertices exactly on clipping lines (lecture 09's benchmark scene)."""
+    mesh = teapot(3, dtype=D)
+    g = torch.Generator().manual_seed(0)
+    colors = torch.rand(mesh.faces.shape[0], 3, generator=g, dtype=D)
+    camera = Camera.look_at((2.6, 1.0, 1.35), fov_y=40, width=24, height=24, dtype=D)
+    w = torch.randn(24, 24, 3, generator=g, dtype=D)
+    return mesh, colors, camera, w
+
+
+def test_teapot_gradients_match_central_differences():
+    # Regression: a piece edge lying on the clipping line (a shared lid edge, seen from both of its faces)
+    # was split at t = noise / noise, leaving slivers of area 1e-17 with O(1) derivatives: vertex 253 got
+    # (0.94, -8.78, 2.47) for (-0.16, -3.48, 1.90). Vertex 366 sits on the z = 0 seam (4 copies) where three
+    # lines meet (its z moved by 0.7 under a fix that kept such vertices unclipped); the copies move
+    # together, so their gradients are summed (welded).
+    mesh, colors, camera, w = _teapot_for_gradients()
+    verts = mesh.verts.clone().requires_grad_(True)
+    (auto,) = torch.autograd.grad((w * exact_coverage(Mesh(verts, mesh.faces), camera, colors)).sum(), verts)
+
+    def loss(v):
+        return (w * exact_coverage(Mesh(v, mesh.faces), camera, colors)).sum().item()
+
+    h = 1e-6
+    for i, axes in ((253, (0, 1, 2)), (366, (2,))):
+        copies = (mesh.verts - mesh.verts[i]).norm(dim=1) < 1e-9
+        for axis in axes:
+            step = torch.zeros_like(mesh.verts)
+            step[copies, axis] = h
+            numeric = (loss(mesh.verts + step) - loss(mesh.verts - step)) / (2 * h)
+            assert auto[copies, axis].sum().item() == pytest.approx(numeric, abs=2e-5, rel=1e-5), (i, axis)
+
+
+def test_hidden_sliver_has_no_gradient():
+    # Regression: in pixel (row 9, column 14) face 119 lies behind the teapot's lid; it used to keep a piece of
+    # area 2e-17 along the lid edge 259-291 whose area gradient had norm 4 (its true derivative is 0).
+    mesh, _, camera, _ = _teapot_for_gradients()
+    verts = mesh.verts.clone().requires_grad_(True)
+    regions = visible_regions(Mesh(verts, mesh.faces), camera)
+    mine = (regions.pixel == 9 * 24 + 14) & (regions.face == 119)
+    area = regions.area[mine].sum()
+    assert abs(area.item()) < 1e-12
+    if area.requires_grad:
+        (g,) = torch.autograd.grad(area, verts, retain_graph=True)
+        assert g.abs().max().item() < 1e-9
+    # and no piece anywhere has a vertex whose derivative is a ratio of rounding errors
+    (g,) = torch.autograd.grad((regions.area * torch.linspace(-1, 1, regions.area.numel(), dtype=D)).sum(), verts)
+    assert torch.isfinite(g).all()
+
+
+def test_clip_rows_edge_on_the_line_splits_at_its_start():
+    # the bottom edge lies on the line y = 0, its two ends with rounding noise of opposite signs: split at
+    # t = noise / noise, the piece below the line got a derivative of 1e16; now it is split at its start
+    poly = torch.tensor([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]], dtype=D, requires_grad=True)
+    s = poly[..., 1] + torch.tensor([[1e-17, -1e-17, 0.0, 0.0]], dtype=D)
+    below, n = coverage._clip_rows(poly, torch.tensor([4]), -s, tol=1e-12)   # the part y <= 0: area 0
+    above, m = coverage._clip_rows(poly, torch.tensor([4]), s, tol=1e-12)
+    assert torch.equal(below[0, 0], poly[0, 0].detach()) and n.item() == 3 and m.item() == 5
+    (g,) = torch.autograd.grad(coverage._areas(below).sum(), poly, retain_graph=True)
+    assert torch.isfinite(g).all() and g.abs().max().item() <= 1.0
+    (both,) = torch.autograd.grad(coverage._areas(below).sum() + coverage._areas(above).sum(), poly)
+    (whole,) = torch.autograd.grad(coverage._areas(poly).sum(), poly)          # the two parts tile the square
+    assert torch.allclose(both, whole, atol=1e-12)
+
+
 # ------------------------------------------------------------------------------------------- bad input
 
 def test_bad_input():
