@@ -38,6 +38,10 @@ from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blin
                       phong, sample_texture, srgb_to_linear)
 from .shadows import SpotLight, shadow_factor, shadow_map
 from .soft import nmr_image, nmr_rasterize, soft_rasterize
+from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
+from .fit import fit_camera, fit_mesh_from_silhouettes
+from .fit_texture import fit_texture_from_images, fit_vertex_colors_from_images
+from .fit_views import fit_with_learned_views
 
 __version__ = "0.1.0"
 
@@ -56,6 +60,9 @@ __all__ = [
     "shadow_map", "shadow_factor", "SpotLight", "BVH", "raycast",
     # differentiable rasterization
     "soft_rasterize", "nmr_rasterize", "nmr_image",
+    # inverse rendering
+    "silhouette_iou_loss", "smoothness_loss", "iou", "psnr", "fit_mesh_from_silhouettes", "fit_camera",
+    "fit_texture_from_images", "fit_vertex_colors_from_images", "fit_with_learned_views",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
     "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",
