@@ -828,3 +828,6 @@ def plot_pixel_pieces(pieces, colors=None, lines=None, ax=None, title: str | Non
     if title:
         ax.set_title(title, fontsize=9)
     return ax
+
+from .viz_fit import fit_figure, history_frames, mesh_renderer, plot_history, save_fit_gif, save_gif, show_gif
+__all__ += ["plot_history", "history_frames", "mesh_renderer", "save_gif", "save_fit_gif", "fit_figure", "show_gif"]

@@ -19,6 +19,7 @@
 * ``gradients`` (``course.bench.gradients``): visibility gradients (finite differences, edge sampling,
   Reynolds, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
   error, a table and a Pareto plot.
+* ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -34,7 +35,7 @@ import json
 
 import torch
 
-from . import aa, gradients, precision, raster, raytrace, shadows, skips, soft
+from . import aa, fit, gradients, precision, raster, raytrace, shadows, skips, soft
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -43,7 +44,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
-           "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients}
+           "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit}
 
 
 def cli(argv) -> int:

@@ -1,0 +1,235 @@
+"""The inverse-rendering benchmark (lecture 10): ``python -m course bench fit [--only mesh,camera,texture,views]
+[--fast]``.
+
+Each application of lecture 10 is fitted once, with its entry point's defaults and seed 0, and reported as
+steps, wall time and the final metric on held-out views next to its start value and the issue's target:
+
+* **mesh**: ``course.fit.fit_mesh_from_silhouettes(teapot, n_views=8)``, a sphere deformed to the teapot's
+  silhouettes, and again with the regulariser off (``smoothness=0``) to show what it is for. Metrics: the
+  held-out IoU, target >= 0.90, and the fitted mesh's self-intersections (``course.fit.self_intersections``,
+  pairs of faces that cross each other; the start sphere has none), target 0.
+* **camera**: ``course.fit.fit_camera`` on ``course.fit.camera_problem()`` (the teapot, flat-shaded by a light
+  fixed in the world, seen from a reference camera; the start 30° away about the world's vertical axis, not
+  the view axis), once per gradient in ``course.fit.CAMERA_METHODS`` (read at run time, so a new method joins
+  by itself). Metrics: the rotation error, target <= 2°, and the centre error, target <= 2 % of the viewing
+  distance (two rows per fit, one time).
+* **texture**: ``course.fit_texture.fit_texture_from_images`` (the teapot's checker texture), and
+  ``fit_vertex_colors_from_images`` against the same checker (vertex colours can only blur its edges: below
+  the target by design) and against a smooth vertex-coloured target (``smooth_vertex_colors(teapot, 0)``).
+  Metric: the held-out PSNR, target >= 30 dB.
+* **views**: ``course.fit_views.fit_with_learned_views(teapot)``, the views fixed on the ring
+  (``learn_views=False``) and learned (``True``). Metric: the held-out IoU, target >= 0.90.
+
+The teapot is ``models.teapot(dtype=torch.float64)`` (``teapot(4)`` in ``camera_problem``). A fit is slow
+(seconds to minutes), so each runs once (``REPEAT = 1``; ``--repeat`` is accepted and ignored), timed with
+``time.perf_counter`` around the call, with ``progress=False``; a line per fit is printed as each application
+finishes, then the table. An application whose module or function cannot be imported is skipped with a printed
+note. ``--fast`` runs every fit small (few steps, small images) to check that the command works; its numbers
+are not the course's.
+"""
+from __future__ import annotations
+
+import importlib
+import inspect
+import time
+
+import torch
+
+from .. import models
+from ..mesh import Mesh
+
+__all__ = ["APPLICATIONS", "bench_fit", "format_table", "add_arguments", "run"]
+
+REPEAT = 1               # a fit takes seconds to a minute: each runs once
+DESCRIPTION = "lecture 10's fits (mesh, camera, texture, views): steps, time, final metric on held-out views"
+
+APPLICATIONS = ("mesh", "camera", "texture", "views")
+
+# the issue's targets: (better, target)
+IOU_TARGET = ("higher", 0.90)
+ROTATION_TARGET = ("lower", 2.0)            # degrees
+CENTER_TARGET = ("lower", 2.0)              # percent of the reference's viewing distance
+PSNR_TARGET = ("higher", 30.0)              # dB
+NO_CROSSINGS = ("lower", 0)                 # pairs of faces of the fitted mesh that cross each other
+
+
+# ------------------------------------------------------------------------------------------- helpers
+
+def _call(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` without the keyword arguments ``fn`` does not take (the ``--fast`` sizes are
+    passed to every fit; a fit without, say, ``subdivisions`` just runs at its own)."""
+    params = inspect.signature(fn).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        kwargs = {k: v for k, v in kwargs.items() if k in params}
+    return fn(*args, **kwargs)
+
+
+def _timed(fn, *args, **kwargs):
+    start = time.perf_counter()
+    result = _call(fn, *args, **kwargs)
+    return result, time.perf_counter() - start
+
+
+def _row(application, method, result, seconds, metric, unit, start, final, target):
+    better, goal = target
+    final = None if final is None else float(final)
+    met = final is not None and (final >= goal if better == "higher" else final <= goal)
+    return dict(application=application, method=method, steps=len(result.history.loss), seconds=seconds,
+                metric=metric, unit=unit, start=None if start is None else float(start), final=final,
+                target=goal, better=better, met=bool(met))
+
+
+def _find(module_name, name, out):
+    """``module.name``, or None with a printed note when the module or the function does not exist yet."""
+    try:
+        module = importlib.import_module(f"course.{module_name}")
+    except ImportError as err:
+        out(f"note: skipped {name}: course.{module_name} cannot be imported ({err})")
+        return None
+    fn = getattr(module, name, None)
+    if fn is None:
+        out(f"note: skipped {name}: course.{module_name} has no {name}")
+    return fn
+
+
+# ------------------------------------------------------------------------------------- applications
+
+def _mesh_rows(fast, out):
+    from .. import fit
+    teapot = models.teapot(dtype=torch.float64)
+    small = dict(n_views=4, size=32, steps=10, subdivisions=2) if fast else dict(n_views=8)
+    crossings = getattr(fit, "self_intersections", None)
+    rows = []
+    for label, extra in (("soft", {}), ("soft, smoothness=0", dict(smoothness=0.0))):
+        r, s = _timed(fit.fit_mesh_from_silhouettes, teapot, seed=0, progress=False, **small, **extra)
+        rows.append(_row("mesh", label, r, s, "held-out IoU", "", r.start_iou, r.iou, IOU_TARGET))
+        if crossings is not None and r.history.snapshots:                 # what the regulariser is for
+            start = Mesh(r.history.snapshots[0], r.mesh.faces)
+            rows.append(_row("mesh", label, r, s, "self-intersections", "pairs", len(crossings(start)),
+                             len(crossings(r.mesh)), NO_CROSSINGS))
+    return rows
+
+
+def _camera_rows(fast, out):
+    from .. import fit
+    mesh, colors, ref_cam, start, ref_image = fit.camera_problem(size=24 if fast else 64)
+    rows = []
+    for method in fit.CAMERA_METHODS:
+        r, s = _timed(fit.fit_camera, mesh, ref_image, start, method=method, face_colors=colors,
+                      reference_camera=ref_cam, progress=False, seed=0, **(dict(steps=5) if fast else {}))
+        rows.append(_row("camera", method, r, s, "rotation error", "deg", r.history.metrics["rotation_deg"][0],
+                         r.rotation_error_deg, ROTATION_TARGET))
+        rows.append(_row("camera", method, r, s, "centre error", "%", r.history.metrics["center_pct"][0],
+                         r.center_error_pct, CENTER_TARGET))
+    return rows
+
+
+def _texture_rows(fast, out):
+    small = dict(steps=10, size=32) if fast else {}
+    rows = []
+    fn = _find("fit_texture", "fit_texture_from_images", out)
+    if fn is not None:
+        r, s = _timed(fn, seed=0, progress=False, **small)
+        rows.append(_row("texture", "texture, checker target", r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr,
+                         PSNR_TARGET))
+    fn = _find("fit_texture", "fit_vertex_colors_from_images", out)
+    if fn is not None:
+        for label, extra in _vertex_color_variants(fn, out):
+            r, s = _timed(fn, seed=0, progress=False, **small, **extra)
+            rows.append(_row("texture", label, r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr, PSNR_TARGET))
+    return rows
+
+
+def _vertex_color_variants(fn, out):
+    """The vertex-colour fit against the teapot's checker texture (the default target: vertex colours can only
+    blur its edges) and against a smooth vertex-coloured target (``smooth_vertex_colors(teapot, 0)``: exactly
+    representable), when the function takes ``target_colors``."""
+    smooth = _find("fit_texture", "smooth_vertex_colors", out)
+    if "target_colors" not in inspect.signature(fn).parameters or smooth is None:
+        out("note: fit_vertex_colors_from_images takes no target_colors: the textured target only")
+        return [("vertex colours, checker target", {})]
+    colors = smooth(models.teapot(dtype=torch.float64), 0)
+    return [("vertex colours, checker target", {}), ("vertex colours, vertex-coloured target",
+                                                      dict(target_colors=colors))]
+
+
+def _views_rows(fast, out):
+    fn = _find("fit_views", "fit_with_learned_views", out)
+    if fn is None:
+        return []
+    teapot = models.teapot(dtype=torch.float64)
+    small = dict(n_views=4, size=32, steps=8, subdivisions=2) if fast else {}
+    rows = []
+    for learn in (False, True):
+        r, s = _timed(fn, teapot, learn_views=learn, seed=0, progress=False, **small)
+        rows.append(_row("views", "learned views" if learn else "ring (fixed)", r, s, "held-out IoU", "",
+                         r.start_iou, r.iou, IOU_TARGET))
+    return rows
+
+
+RUNNERS = {"mesh": _mesh_rows, "camera": _camera_rows, "texture": _texture_rows, "views": _views_rows}
+
+
+def bench_fit(only=APPLICATIONS, fast: bool = False, out=print) -> list[dict]:
+    """Run the fits of the applications in ``only`` (names of ``APPLICATIONS``) once each; returns one row
+    (dict) per fit and metric: application, method, steps, seconds, metric, unit, start, final, target,
+    better ("higher" / "lower"), met. Prints a line per row as each application finishes (a full run takes
+    minutes), then the rows as a markdown table."""
+    unknown = [a for a in only if a not in APPLICATIONS]
+    if unknown:
+        raise ValueError(f"unknown application(s) {unknown}; choose from {', '.join(APPLICATIONS)}")
+    rows = []
+    for app in only:
+        new = RUNNERS[app](fast, out)
+        for r in new:
+            out(f"{app} / {r['method']}: {r['metric']} {_num(r['start'], r['unit'])} -> {_num(r['final'], r['unit'])}"
+                f" in {r['steps']} steps, {r['seconds']:.1f} s")
+        rows += new
+    out(format_table(rows))
+    return rows
+
+
+def _num(v, unit):
+    if v is None:
+        return "–"
+    if unit == "":
+        return f"{v:.3f}"
+    if unit == "pairs":
+        return f"{v:.0f}"
+    return f"{v:.2f}{' ' + unit if unit != '%' else unit}"
+
+
+def format_table(rows) -> str:
+    """The rows as a markdown table."""
+    lines = ["| application | method | steps | time (s) | metric | start | final | target | met |",
+             "|---|---|--:|--:|---|--:|--:|--:|:-:|"]
+    for r in rows:
+        goal = f"{'≥' if r['better'] == 'higher' else '≤'} {_num(r['target'], r['unit'])}"
+        lines.append(f"| {r['application']} | {r['method']} | {r['steps']} | {r['seconds']:.1f} | {r['metric']} | "
+                     f"{_num(r['start'], r['unit'])} | {_num(r['final'], r['unit'])} | {goal} | "
+                     f"{'yes' if r['met'] else 'no'} |")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------- the command's options
+
+def _applications(text: str) -> list[str]:
+    names = [a.strip() for a in text.split(",") if a.strip()]
+    bad = [a for a in names if a not in APPLICATIONS]
+    if bad or not names:
+        import argparse
+        raise argparse.ArgumentTypeError(f"unknown application(s) {bad or text!r}; choose from "
+                                         f"{','.join(APPLICATIONS)}")
+    return names
+
+
+def add_arguments(parser) -> None:
+    """The options of ``python -m course bench fit``."""
+    parser.add_argument("--only", type=_applications, default=list(APPLICATIONS),
+                        help=f"comma-separated applications (default: all of {','.join(APPLICATIONS)})")
+    parser.add_argument("--fast", action="store_true",
+                        help="tiny fits (few steps, small images): checks the command, not the course's numbers")
+
+
+def run(args) -> list[dict]:
+    return bench_fit(args.only, args.fast)

@@ -1,0 +1,92 @@
+"""The fit benchmark (course.bench.fit): its camera problem, its rows and table, its options; never its timings.
+Every run here is ``--fast`` (tiny fits): the rows must be well formed, the numbers are not the course's."""
+import argparse
+import json
+import math
+
+import pytest
+import torch
+
+from course import fit
+from course.bench import BENCHES, cli
+from course.bench import fit as fb
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """One torch thread while a test fits (steadier on a shared machine), restored afterwards."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+KEYS = {"application", "method", "steps", "seconds", "metric", "unit", "start", "final", "target", "better", "met"}
+
+
+def check_rows(rows):
+    for r in rows:
+        assert set(r) == KEYS, r
+        assert isinstance(r["steps"], int) and r["steps"] > 0 and r["seconds"] >= 0
+        assert math.isfinite(r["start"]) and math.isfinite(r["final"]) and r["better"] in ("higher", "lower")
+        assert r["met"] == (r["final"] >= r["target"] if r["better"] == "higher" else r["final"] <= r["target"])
+
+
+def test_registered():
+    assert BENCHES["fit"] is fb and fb.REPEAT == 1 and fb.DESCRIPTION
+
+
+def test_cli_fast_camera_rows_every_method(tmp_path, capsys):
+    out = tmp_path / "fit.json"
+    assert cli(["fit", "--fast", "--only", "camera", "--threads", "1", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    check_rows(rows)
+    assert [r["method"] for r in rows] == [m for m in fit.CAMERA_METHODS for _ in range(2)]
+    assert [r["metric"] for r in rows[:2]] == ["rotation error", "centre error"]
+    assert all(r["start"] == pytest.approx(30.0, abs=1e-6) for r in rows[::2])   # camera_problem: 30° off
+    assert all(r["steps"] == 5 for r in rows)
+    hard = [r for r in rows if r["method"] == "hard"]                       # autograd alone: the pose never moves
+    assert all(r["final"] == pytest.approx(r["start"]) for r in hard)
+    assert rows[0]["target"] == 2.0 and rows[0]["better"] == "lower"
+    printed = capsys.readouterr().out
+    assert "| application | method | steps |" in printed and printed.count("| camera |") == len(rows)
+
+
+def test_fast_mesh_views_and_texture_rows():
+    lines = []
+    rows = fb.bench_fit(["mesh", "views", "texture"], fast=True, out=lines.append)
+    check_rows(rows)
+    mesh = [r for r in rows if r["application"] == "mesh"]
+    assert [(r["method"], r["metric"]) for r in mesh] == [
+        (m, metric) for m in ("soft", "soft, smoothness=0") for metric in ("held-out IoU", "self-intersections")]
+    assert mesh[0]["start"] == mesh[2]["start"]                             # one seed, one start
+    assert mesh[1]["start"] == 0 and mesh[1]["unit"] == "pairs"             # the start sphere is embedded
+    assert all(0 <= r["final"] <= 1 for r in rows if r["metric"] == "held-out IoU")
+    assert [r["method"] for r in rows if r["application"] == "views"] == ["ring (fixed)", "learned views"]
+    texture = [r for r in rows if r["application"] == "texture"]
+    assert [r["method"] for r in texture] == ["texture, checker target", "vertex colours, checker target",
+                                              "vertex colours, vertex-coloured target"]
+    assert all(r["unit"] == "dB" and r["final"] > r["start"] for r in texture)
+    assert not [line for line in lines if line.startswith("note:")]
+    assert lines[-1].startswith("| application")
+
+
+def test_missing_module_or_function_is_a_note_not_a_crash():
+    lines = []
+    assert fb._find("no_such_module", "fit_x", lines.append) is None
+    assert fb._find("fit", "no_such_fit", lines.append) is None
+    assert "cannot be imported" in lines[0] and "has no no_such_fit" in lines[1]
+
+
+def test_table_and_options():
+    rows = [dict(application="camera", method="soft", steps=150, seconds=2.5, metric="rotation error", unit="deg",
+                 start=30.0, final=0.97, target=2.0, better="lower", met=True),
+            dict(application="mesh", method="soft", steps=300, seconds=40.0, metric="held-out IoU", unit="",
+                 start=0.66, final=0.89, target=0.9, better="higher", met=False)]
+    table = fb.format_table(rows).splitlines()
+    assert table[2] == "| camera | soft | 150 | 2.5 | rotation error | 30.00 deg | 0.97 deg | ≤ 2.00 deg | yes |"
+    assert table[3] == "| mesh | soft | 300 | 40.0 | held-out IoU | 0.660 | 0.890 | ≥ 0.900 | no |"
+    assert fb._applications("mesh, camera") == ["mesh", "camera"]
+    with pytest.raises(argparse.ArgumentTypeError, match="unknown application"):
+        fb._applications("mesh,teapots")
+    with pytest.raises(ValueError, match="unknown application"):
+        fb.bench_fit(["teapots"])
