@@ -70,11 +70,14 @@ def test_fast_mesh_views_and_texture_rows():
     assert lines[-1].startswith("| application")
 
 
-def test_missing_module_or_function_is_a_note_not_a_crash():
+def test_fit_picture(tmp_path):
+    """--figure: the mesh fit's target / start / result picture is written."""
     lines = []
-    assert fb._find("no_such_module", "fit_x", lines.append) is None
-    assert fb._find("fit", "no_such_fit", lines.append) is None
-    assert "cannot be imported" in lines[0] and "has no no_such_fit" in lines[1]
+    fb.bench_fit(["mesh"], fast=True, out=lines.append, figure=str(tmp_path / "fit.png"))
+    from PIL import Image
+    with Image.open(tmp_path / "fit.png") as im:
+        assert im.size[0] > 2 * im.size[1] > 0
+    assert f"wrote {tmp_path / 'fit.png'}" in lines
 
 
 def test_table_and_options():

@@ -23,22 +23,20 @@ steps, wall time and the final metric on held-out views next to its start value 
 The teapot is ``models.teapot(dtype=torch.float64)`` (``teapot(4)`` in ``camera_problem``). A fit is slow
 (seconds to minutes), so each runs once (``REPEAT = 1``; ``--repeat`` is accepted and ignored), timed with
 ``time.perf_counter`` around the call, with ``progress=False``; a line per fit is printed as each application
-finishes, then the table. An application whose module or function cannot be imported is skipped with a printed
-note. ``--fast`` runs every fit small (few steps, small images) to check that the command works; its numbers
+finishes, then the table. ``--figure PNG`` also saves the mesh fit as target / start / result (the README's
+picture, ``save_fit_picture``). ``--fast`` runs every fit small (few steps, small images) to check that the command works; its numbers
 are not the course's.
 """
 from __future__ import annotations
 
-import importlib
-import inspect
 import time
 
 import torch
 
-from .. import models
+from .. import fit, fit_texture, fit_views, models
 from ..mesh import Mesh
 
-__all__ = ["APPLICATIONS", "bench_fit", "format_table", "add_arguments", "run"]
+__all__ = ["APPLICATIONS", "bench_fit", "save_fit_picture", "format_table", "add_arguments", "run"]
 
 REPEAT = 1               # a fit takes seconds to a minute: each runs once
 DESCRIPTION = "lecture 10's fits (mesh, camera, texture, views): steps, time, final metric on held-out views"
@@ -55,18 +53,9 @@ NO_CROSSINGS = ("lower", 0)                 # pairs of faces of the fitted mesh 
 
 # ------------------------------------------------------------------------------------------- helpers
 
-def _call(fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` without the keyword arguments ``fn`` does not take (the ``--fast`` sizes are
-    passed to every fit; a fit without, say, ``subdivisions`` just runs at its own)."""
-    params = inspect.signature(fn).parameters
-    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        kwargs = {k: v for k, v in kwargs.items() if k in params}
-    return fn(*args, **kwargs)
-
-
 def _timed(fn, *args, **kwargs):
     start = time.perf_counter()
-    result = _call(fn, *args, **kwargs)
+    result = fn(*args, **kwargs)
     return result, time.perf_counter() - start
 
 
@@ -79,39 +68,44 @@ def _row(application, method, result, seconds, metric, unit, start, final, targe
                 target=goal, better=better, met=bool(met))
 
 
-def _find(module_name, name, out):
-    """``module.name``, or None with a printed note when the module or the function does not exist yet."""
-    try:
-        module = importlib.import_module(f"course.{module_name}")
-    except ImportError as err:
-        out(f"note: skipped {name}: course.{module_name} cannot be imported ({err})")
-        return None
-    fn = getattr(module, name, None)
-    if fn is None:
-        out(f"note: skipped {name}: course.{module_name} has no {name}")
-    return fn
-
-
 # ------------------------------------------------------------------------------------- applications
 
-def _mesh_rows(fast, out):
-    from .. import fit
+def _mesh_rows(fast, out, figure=None):
     teapot = models.teapot(dtype=torch.float64)
     small = dict(n_views=4, size=32, steps=10, subdivisions=2) if fast else dict(n_views=8)
-    crossings = getattr(fit, "self_intersections", None)
     rows = []
     for label, extra in (("soft", {}), ("soft, smoothness=0", dict(smoothness=0.0))):
         r, s = _timed(fit.fit_mesh_from_silhouettes, teapot, seed=0, progress=False, **small, **extra)
         rows.append(_row("mesh", label, r, s, "held-out IoU", "", r.start_iou, r.iou, IOU_TARGET))
-        if crossings is not None and r.history.snapshots:                 # what the regulariser is for
-            start = Mesh(r.history.snapshots[0], r.mesh.faces)
-            rows.append(_row("mesh", label, r, s, "self-intersections", "pairs", len(crossings(start)),
-                             len(crossings(r.mesh)), NO_CROSSINGS))
+        start = Mesh(r.history.snapshots[0], r.mesh.faces)                  # what the regulariser is for
+        rows.append(_row("mesh", label, r, s, "self-intersections", "pairs", len(fit.self_intersections(start)),
+                         len(fit.self_intersections(r.mesh)), NO_CROSSINGS))
+        if figure and not extra:
+            save_fit_picture(teapot, r, figure)
+            out(f"wrote {figure}")
     return rows
 
 
-def _camera_rows(fast, out):
-    from .. import fit
+def save_fit_picture(target, result, path, size: int = 256):
+    """The README's picture of a fit: the target, the start sphere and the result of a silhouette fit, shaded
+    from one held-out view (``fit.sphere_views(16)[3]``, three quarters from above), captioned with the held-out
+    IoU."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..viz_fit import fit_figure, mesh_renderer
+    camera = fit.sphere_views(16, size=size, dtype=torch.float64)[3]
+    draw = mesh_renderer(result.mesh.faces, camera)
+    fig = fit_figure(draw(target), draw(result.history.snapshots[0]), draw(result.mesh.verts),
+                     captions=("the teapot (8 silhouettes seen)", f"start: held-out IoU {result.start_iou:.3f}",
+                               f"after {len(result.history.loss)} steps: IoU {result.iou:.3f}"))
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _camera_rows(fast, out, figure=None):
     mesh, colors, ref_cam, start, ref_image = fit.camera_problem(size=24 if fast else 64)
     rows = []
     for method in fit.CAMERA_METHODS:
@@ -124,44 +118,25 @@ def _camera_rows(fast, out):
     return rows
 
 
-def _texture_rows(fast, out):
+def _texture_rows(fast, out, figure=None):
     small = dict(steps=10, size=32) if fast else {}
-    rows = []
-    fn = _find("fit_texture", "fit_texture_from_images", out)
-    if fn is not None:
-        r, s = _timed(fn, seed=0, progress=False, **small)
-        rows.append(_row("texture", "texture, checker target", r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr,
-                         PSNR_TARGET))
-    fn = _find("fit_texture", "fit_vertex_colors_from_images", out)
-    if fn is not None:
-        for label, extra in _vertex_color_variants(fn, out):
-            r, s = _timed(fn, seed=0, progress=False, **small, **extra)
-            rows.append(_row("texture", label, r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr, PSNR_TARGET))
+    r, s = _timed(fit_texture.fit_texture_from_images, seed=0, progress=False, **small)
+    rows = [_row("texture", "texture, checker target", r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr,
+                 PSNR_TARGET)]
+    smooth = fit_texture.smooth_vertex_colors(models.teapot(dtype=torch.float64), 0)
+    for label, extra in (("vertex colours, checker target", {}),            # can only blur the checker's edges
+                         ("vertex colours, vertex-coloured target", dict(target_colors=smooth))):
+        r, s = _timed(fit_texture.fit_vertex_colors_from_images, seed=0, progress=False, **small, **extra)
+        rows.append(_row("texture", label, r, s, "held-out PSNR", "dB", r.start_psnr, r.psnr, PSNR_TARGET))
     return rows
 
 
-def _vertex_color_variants(fn, out):
-    """The vertex-colour fit against the teapot's checker texture (the default target: vertex colours can only
-    blur its edges) and against a smooth vertex-coloured target (``smooth_vertex_colors(teapot, 0)``: exactly
-    representable), when the function takes ``target_colors``."""
-    smooth = _find("fit_texture", "smooth_vertex_colors", out)
-    if "target_colors" not in inspect.signature(fn).parameters or smooth is None:
-        out("note: fit_vertex_colors_from_images takes no target_colors: the textured target only")
-        return [("vertex colours, checker target", {})]
-    colors = smooth(models.teapot(dtype=torch.float64), 0)
-    return [("vertex colours, checker target", {}), ("vertex colours, vertex-coloured target",
-                                                      dict(target_colors=colors))]
-
-
-def _views_rows(fast, out):
-    fn = _find("fit_views", "fit_with_learned_views", out)
-    if fn is None:
-        return []
+def _views_rows(fast, out, figure=None):
     teapot = models.teapot(dtype=torch.float64)
     small = dict(n_views=4, size=32, steps=8, subdivisions=2) if fast else {}
     rows = []
     for learn in (False, True):
-        r, s = _timed(fn, teapot, learn_views=learn, seed=0, progress=False, **small)
+        r, s = _timed(fit_views.fit_with_learned_views, teapot, learn_views=learn, seed=0, progress=False, **small)
         rows.append(_row("views", "learned views" if learn else "ring (fixed)", r, s, "held-out IoU", "",
                          r.start_iou, r.iou, IOU_TARGET))
     return rows
@@ -170,17 +145,17 @@ def _views_rows(fast, out):
 RUNNERS = {"mesh": _mesh_rows, "camera": _camera_rows, "texture": _texture_rows, "views": _views_rows}
 
 
-def bench_fit(only=APPLICATIONS, fast: bool = False, out=print) -> list[dict]:
+def bench_fit(only=APPLICATIONS, fast: bool = False, out=print, figure=None) -> list[dict]:
     """Run the fits of the applications in ``only`` (names of ``APPLICATIONS``) once each; returns one row
     (dict) per fit and metric: application, method, steps, seconds, metric, unit, start, final, target,
     better ("higher" / "lower"), met. Prints a line per row as each application finishes (a full run takes
-    minutes), then the rows as a markdown table."""
+    minutes), then the rows as a markdown table. figure: a path for ``save_fit_picture`` of the mesh fit."""
     unknown = [a for a in only if a not in APPLICATIONS]
     if unknown:
         raise ValueError(f"unknown application(s) {unknown}; choose from {', '.join(APPLICATIONS)}")
     rows = []
     for app in only:
-        new = RUNNERS[app](fast, out)
+        new = RUNNERS[app](fast, out, figure)
         for r in new:
             out(f"{app} / {r['method']}: {r['metric']} {_num(r['start'], r['unit'])} -> {_num(r['final'], r['unit'])}"
                 f" in {r['steps']} steps, {r['seconds']:.1f} s")
@@ -229,7 +204,9 @@ def add_arguments(parser) -> None:
                         help=f"comma-separated applications (default: all of {','.join(APPLICATIONS)})")
     parser.add_argument("--fast", action="store_true",
                         help="tiny fits (few steps, small images): checks the command, not the course's numbers")
+    parser.add_argument("--figure", metavar="PNG",
+                        help="also save the mesh fit's target / start / result picture there (docs/fit_teapot.png)")
 
 
 def run(args) -> list[dict]:
-    return bench_fit(args.only, args.fast)
+    return bench_fit(args.only, args.fast, figure=args.figure)
