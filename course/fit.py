@@ -66,8 +66,10 @@ class FitHistory:
     """What a loop recorded. ``loss``: one float per step (the total loss *before* that step's update);
     ``snapshot_steps``: the steps at which ``snapshots`` were taken (step k is the state before update k;
     step ``steps`` is the final state); ``snapshots``: detached copies (vertices (V, 3) for a mesh fit,
-    rendered images (H, W) or (H, W, C) for a camera fit); ``metrics``: named per-step series (e.g. the
-    rotation error of a camera fit)."""
+    rendered images (H, W) or (H, W, C) for a camera fit); ``metrics``: named series, one value per step
+    (``steps`` or ``steps + 1`` entries, e.g. the rotation error of a camera fit) or one per snapshot
+    (``len(snapshot_steps)`` entries, e.g. a held-out PSNR measured only at snapshots); ``viz_fit.plot_history``
+    tells them apart by length."""
     loss: list = field(default_factory=list)
     snapshot_steps: list = field(default_factory=list)
     snapshots: list = field(default_factory=list)

@@ -87,19 +87,20 @@ def _mesh_rows(fast, out, figure=None):
 
 
 def save_fit_picture(target, result, path, size: int = 256):
-    """The README's picture of a fit: the target, the start sphere and the result of a silhouette fit, shaded
-    from one held-out view (``fit.sphere_views(16)[3]``, three quarters from above), captioned with the held-out
-    IoU."""
+    """The README's picture of a fit: the target (untextured), the start sphere and the result of a silhouette
+    fit, shaded, seen from the side (eye (0, 0.8, 3), not a training view), captioned with the held-out IoU."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..camera import Camera
     from ..viz_fit import fit_figure, mesh_renderer
-    camera = fit.sphere_views(16, size=size, dtype=torch.float64)[3]
+    camera = Camera.look_at((0.0, 0.8, 3.0), fov_y=40, width=size, height=size, dtype=torch.float64)
     draw = mesh_renderer(result.mesh.faces, camera)
-    fig = fit_figure(draw(target), draw(result.history.snapshots[0]), draw(result.mesh.verts),
-                     captions=("the teapot (8 silhouettes seen)", f"start: held-out IoU {result.start_iou:.3f}",
-                               f"after {len(result.history.loss)} steps: IoU {result.iou:.3f}"))
+    fig = fit_figure(draw(Mesh(target.verts, target.faces)), draw(result.history.snapshots[0]),
+                     draw(result.mesh.verts),
+                     captions=(f"{len(result.history.loss)} steps from 8 silhouettes",
+                               f"held-out IoU {result.start_iou:.3f}", f"held-out IoU {result.iou:.3f}"))
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
     return path
