@@ -49,8 +49,9 @@ NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": 
          "6.1": "light_space", "6.2": "biased_lit", "6.3": "pcf",
          "7.1": "ray_triangle", "7.2": "ray_aabb", "7.3": "shadow_ray",
          "8.1": "soft_coverage", "8.2": "soft_silhouette", "8.3": "soft_blend",
-         "9.1": "central_difference", "9.2": "boundary_term", "9.3": "edge_sample"}
-LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-09: tests/test_grading_0N.py
+         "9.1": "central_difference", "9.2": "boundary_term", "9.3": "edge_sample",
+         "10.1": "silhouette_iou_loss", "10.2": "smoothness_loss", "10.3": "gradient_step"}
+LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-10: tests/test_grading_NN.py
 
 
 def rodrigues_dividing_by_theta(w):
