@@ -249,8 +249,10 @@ def _timed(fn, repeat):
 
 
 def _fd_vertices(exact_verts, n, seed=0):
-    """A seeded subset of ``n`` vertices among those whose exact gradient is not zero (all of them if few)."""
-    live = (exact_verts.abs().sum(1) > 0).nonzero().squeeze(1)
+    """A seeded subset of ``n`` vertices among those whose exact gradient is not zero (all of them if few); a
+    hidden vertex can carry a rounding-level value (1e-36, from zero-area pieces), which counts as zero."""
+    size = exact_verts.abs().sum(1)
+    live = (size > 1e-12 * size.max()).nonzero().squeeze(1)
     if live.numel() <= n:
         return live.tolist()
     pick = torch.randperm(live.numel(), generator=torch.Generator().manual_seed(seed))[:n]
