@@ -213,8 +213,10 @@ def _seam_edges(weld, faces) -> torch.Tensor:
 MAX_CELLS = 512          # a face whose box spans more grid cells skips the grid (_intersecting_faces)
 
 
-def _intersecting_faces(verts, faces, weld):
+def _intersecting_faces(verts, faces, weld, shared_vertex: bool = False):
     """Pairs of faces that may cross each other and share no vertex (in 3D, conservative): f, g (N,) each.
+    shared_vertex: also pairs that share exactly one (welded) vertex and pass through each other from it (a
+    fold of a mesh through itself); two faces sharing an edge cannot cross (their planes meet along it).
 
     Broad phase: a uniform grid of cells about one face wide; faces whose bounding boxes share a cell are
     candidates. Narrow phase: the boxes overlap, and each face has corners strictly on both sides of the
@@ -249,9 +251,10 @@ def _intersecting_faces(verts, faces, weld):
     pair = torch.sort(torch.minimum(f, g) * F + torch.maximum(f, g)).values
     pair = pair[torch.cat([pair.new_ones(min(1, pair.numel()), dtype=torch.bool), pair[1:] != pair[:-1]])]
     f, g = pair // F, pair % F
-    shared = (weld[faces[f]][:, :, None] == weld[faces[g]][:, None, :]).flatten(1).any(1)
+    shared = (weld[faces[f]][:, :, None] == weld[faces[g]][:, None, :]).flatten(1).sum(1)
     overlap = ((lo[f] <= hi[g]) & (lo[g] <= hi[f])).all(1)
-    f, g = f[overlap & ~shared & (f != g)], g[overlap & ~shared & (f != g)]
+    allowed = shared <= (1 if shared_vertex else 0)
+    f, g = f[overlap & allowed & (f != g)], g[overlap & allowed & (f != g)]
     def straddles(a, b):                                                     # b's corners strictly on both sides
         n = torch.linalg.cross(v[a, 1] - v[a, 0], v[a, 2] - v[a, 0])
         d = ((v[b] - v[a, 0][:, None]) * n[:, None]).sum(-1)                 # (N, 3)

@@ -26,10 +26,10 @@ import math
 import numpy as np
 import torch
 
-from .antialias import _crossing_segments, _intersecting_faces
+from .antialias import _intersecting_faces
 from .coverage import _region_chunks
 from .coverage_affine import _Field, polygon_centroids
-from .raster import _camera_space, _screen_triangles
+from .raster import _camera_space, _project, _screen_triangles
 from .scan import _plane, pixel_triangle_pairs
 from .soft import _screen_faces
 
@@ -40,18 +40,15 @@ CUT_SLACK = 1e-9         # of an edge's length: how far past its ends it still c
 
 
 def _edges(prob, p) -> "_Edges":
-    """Every face's edges on screen (differentiable endpoints, the normal out of the face, the welded vertex
-    ids of the endpoints, -1 for points the near-plane clip made), then the faces' intersection lines."""
+    """Every face's edges on screen (differentiable endpoints, the normal out of the face, the ids of the
+    endpoints: welded vertex ids, or one id per welded edge for a point the near-plane clip made on it), then
+    the faces' intersection lines. p: the parameters in float64 (``boundary_gradient``)."""
     mesh, cam = prob.mesh(p), prob.camera(p)
     weld = prob.weld
     cull = _back_faces_hidden(prob, weld)                                   # a closed mesh seen from outside
-    xy, _, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, cull)       # (T, 3, 2), (T,)
+    xy, q, face, _ = _screen_faces(mesh.verts, mesh.faces, cam, cull)       # (T, 3, 2), (T, 3), (T,)
     T = xy.shape[0]
-    ids = torch.full((T, 3), -1, dtype=torch.int64, device=xy.device)
-    # a triangle of a face the near plane did not cut has the face's own corners (clipped ones keep -1)
-    z = _camera_space(mesh.verts, cam)[:, 2]
-    whole = (z[prob.faces[face]].amin(1) >= cam.near).nonzero().squeeze(1)
-    ids[whole] = weld[prob.faces[face[whole]]]
+    ids = _corner_ids(prob, mesh.verts.detach(), cam, xy.detach(), q.detach(), face)
     a, b, c = xy, xy.roll(-1, 1), xy.roll(-2, 1)                            # edge k: corner k → k+1
     va, vb = ids, ids.roll(-1, 1)
     d = (b - a).detach()
@@ -69,6 +66,51 @@ def _edges(prob, p) -> "_Edges":
     edges = _with_crossings(_merge_twins(edges), prob, p, weld)
     edges.culled = cull
     return edges
+
+
+def _corner_ids(prob, verts, cam, xy, q, face):
+    """(T, 3) an id for each corner of the screen triangles of ``_screen_faces``: a face's own corner keeps
+    its welded vertex id; a point the near-plane clip made on the face edge (i, j) gets the id of that welded
+    edge, past the vertex ids, so the two faces sharing a clipped edge name its clipped end alike and the
+    edge is found once (``_merge_twins``). A clipped triangle's corners are matched to the candidates (the
+    face's corners in front of the near plane, the clip points of its edges) by position on screen and q."""
+    faces, weld = prob.faces, prob.weld
+    T = face.numel()
+    V = int(weld.max()) + 1 if weld.numel() else 0
+    ids = torch.empty((T, 3), dtype=torch.int64, device=face.device)
+    if T == 0:
+        return ids
+    vc = _camera_space(verts, cam)                                          # (V, 3) float64
+    z = vc[:, 2]
+    tri = faces[face]                                                       # (T, 3) vertex indices
+    whole = z[tri].amin(1) >= cam.near                                      # not clipped: the face's corners
+    ids[whole] = weld[tri[whole]]
+    cut = (~whole).nonzero().squeeze(1)
+    if cut.numel() == 0:
+        return ids
+    K = cam.K.detach().double()
+    i, j = tri[cut], tri[cut].roll(-1, 1)                                   # (C, 3) edges k → k+1
+    lo, hi = torch.minimum(i, j), torch.maximum(i, j)
+    za, zb = z[lo], z[hi]
+    s = ((cam.near - za) / torch.where(zb == za, torch.ones_like(za), zb - za))[..., None]
+    clip = vc[lo] + s * (vc[hi] - vc[lo])                                   # (C, 3, 3) as raster._clip_point
+    clip[..., 2] = cam.near
+    crosses = (torch.minimum(za, zb) < cam.near) & (torch.maximum(za, zb) >= cam.near)
+    cand = torch.cat([vc[i], clip], 1)                                      # (C, 6, 3): corners, clip points
+    valid = torch.cat([z[i] >= cam.near, crosses], 1)
+    c_xy, c_q = _project(cand, cam, K)
+    pos = torch.cat([xy[cut], q[cut][..., None]], -1)                       # (C, 3, 3) the triangle's corners
+    c_pos = torch.cat([c_xy, c_q[..., None]], -1)                           # (C, 6, 3)
+    scale = pos.abs().amax(-1, keepdim=True) + 1.0
+    dist = ((pos[:, :, None] - c_pos[:, None]).abs() / scale[:, :, None]).amax(-1)   # (C, 3, 6)
+    dist = torch.where(valid[:, None], dist, torch.full_like(dist, math.inf))
+    best = dist.argmin(-1)                                                  # (C, 3) which candidate
+    wi, wj = weld[i], weld[j]
+    edge_key = torch.minimum(wi, wj) * V + torch.maximum(wi, wj)            # (C, 3) welded edge
+    _, edge_id = torch.unique(edge_key, return_inverse=True)
+    cand_id = torch.cat([wi, V + edge_id], 1)                               # (C, 6)
+    ids[cut] = cand_id.gather(1, best)
+    return ids
 
 
 def _merge_twins(edges):
@@ -127,39 +169,98 @@ def _planes(verts_cam, faces, K, orthographic):
 
 
 def _with_crossings(edges, prob, p, weld):
-    """Append the lines where two faces pass through each other (``antialias._intersecting_faces``): for a
-    pair (f, g), the segment where f meets g's plane, projected; the image jumps along the part that lies in
-    g and is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
-    verts = prob.params["verts"]
+    """Append the lines where two faces pass through each other: for each pair (f, g) that may cross
+    (``antialias._intersecting_faces``, pairs sharing one vertex included: a fold through itself), the segment
+    f ∩ g in 3D (``_intersection_segments``), cut at the near plane and projected. The image may jump along
+    it where it is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
+    verts = prob.params["verts"].double()
     # faces that can show (in front of the camera; front faces when back ones never show): the faces of
     # the edges and their twins (a face whose every edge is shared may own none of the merged copies)
     cand = torch.unique(torch.cat([edges.face, edges.twin[edges.twin >= 0]]))
-    f, g = _intersecting_faces(verts.double(), prob.faces[cand], weld)
+    f, g = _intersecting_faces(verts, prob.faces[cand], weld, shared_vertex=True)
     if f.numel() == 0:
         return edges
     f, g = cand[f], cand[g]
-    seg, ok = _crossing_segments(verts.double(), prob.faces, f, g)          # (N, 3, 2, 3), (N, 3)
-    pair, k = ok.nonzero().unbind(1)
-    ends = seg[pair, k]                                                     # (M, 2, 3) world
-    cam = prob.camera0
-    xy, z = cam.project(ends.reshape(-1, 3).to(cam.dtype))
-    xy, z = xy.double().view(-1, 2, 2), z.double().view(-1, 2)
-    keep = (z > cam.near).all(1) & torch.isfinite(xy).all(2).all(1)
-    pair, xy = pair[keep], xy[keep]
-    if pair.numel() == 0:
+    seg, ok = _intersection_segments(verts, prob.faces, f, g)               # (N, 2, 3) world, (N,)
+    cam = prob.camera0.to(dtype=torch.float64)
+    ends = cam.to_camera(seg.reshape(-1, 3)).view(-1, 2, 3)                 # camera space
+    ends, front = _clip_segments_near(ends, cam.near)                       # cut at z = near
+    ok &= front
+    f, g, ends = f[ok], g[ok], ends[ok]
+    if f.numel() == 0:
         return edges
-    fa, ga = f[pair], g[pair]
+    xy, _ = _project(ends.reshape(-1, 3), cam, cam.K.double())
+    xy = xy.view(-1, 2, 2)
     with torch.no_grad():
-        P = _planes(cam.to_camera(verts.to(cam.dtype)).double(), prob.faces, cam.K.double(), cam.orthographic)
-        grad = (P[fa] - P[ga])[:, :2]                                       # ∇(n_f - n_g): toward f nearer
+        P = _planes(cam.to_camera(verts), prob.faces, cam.K.double(), cam.orthographic)
+        grad = (P[f] - P[g])[:, :2]                                         # ∇(n_f - n_g): toward f nearer
         n = -grad / grad.norm(dim=1, keepdim=True).clamp_min(1e-300)        # out of f's region
     dtype = edges.a.dtype
-    none = torch.full((pair.numel(), 2), -1, dtype=torch.int64, device=pair.device)
+    none = torch.full((f.numel(), 2), -1, dtype=torch.int64, device=f.device)
     out = _Edges(torch.cat([edges.a, xy[:, 0].to(dtype)]), torch.cat([edges.b, xy[:, 1].to(dtype)]),
-                 torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, fa]), torch.cat([edges.vid, none]), ga)
-    out.twin = torch.cat([edges.twin, torch.full_like(fa, -1)])
-    out.fold = torch.cat([edges.fold, torch.zeros_like(fa, dtype=torch.bool)])
+                 torch.cat([edges.n, n.to(dtype)]), torch.cat([edges.face, f]), torch.cat([edges.vid, none]), g)
+    out.twin = torch.cat([edges.twin, torch.full_like(f, -1)])
+    out.fold = torch.cat([edges.fold, torch.zeros_like(f, dtype=torch.bool)])
     return out
+
+
+def _chord(v, d, tol):
+    """Where a triangle meets a plane: its corners v (N, 3, 3) at signed distances d (N, 3) from the plane.
+    Returns the two ends (N, 2, 3) of the chord and whether there is one (N,): the corners on the plane
+    (|d| <= tol) and the points where an edge crosses it strictly (its ends on opposite sides), the first two
+    of those (a triangle straddling the plane has exactly two; a corner on the plane is not also counted as
+    the crossing of its two edges, which is what doubled a chord that ended at a corner)."""
+    on = d.abs() <= tol                                                     # (N, 3)
+    side = torch.where(on, torch.zeros_like(d), torch.sign(d))
+    d1, v1 = d.roll(-1, 1), v.roll(-1, 1)
+    across = side * side.roll(-1, 1) < 0                                    # edge k → k+1 crosses strictly
+    s = d / torch.where(across, d - d1, torch.ones_like(d))
+    cross = v + s[..., None] * (v1 - v)                                     # (N, 3, 3)
+    pts = torch.cat([v, cross], 1)                                          # (N, 6, 3) candidates
+    use = torch.cat([on, across], 1)                                        # (N, 6)
+    order = torch.argsort((~use).to(torch.int8), dim=1, stable=True)[:, :2] # the first two used
+    ends = pts.gather(1, order[..., None].expand(-1, -1, 3))
+    return ends, use.sum(1) == 2
+
+
+def _intersection_segments(verts, faces, f, g):
+    """The segment where triangles f and g (N,) cross, in 3D: f's chord on g's plane and g's chord on f's
+    plane lie on the same line (the planes' intersection), and their overlap is f ∩ g. Returns its ends
+    (N, 2, 3) and whether it exists (N,) with a positive length. float64. A chord alone reaches beyond the
+    other face when the crossing ends on that face's open boundary."""
+    v, w = verts[faces[f]], verts[faces[g]]                                 # (N, 3, 3)
+    nf = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    ng = torch.linalg.cross(w[:, 1] - w[:, 0], w[:, 2] - w[:, 0])
+    size = torch.maximum((v - v[:, :1]).abs().amax((1, 2)), (w - w[:, :1]).abs().amax((1, 2)))
+    dv = ((v - w[:, :1]) * ng[:, None]).sum(-1)                             # f's corners to g's plane
+    dw = ((w - v[:, :1]) * nf[:, None]).sum(-1)
+    ef, okf = _chord(v, dv, 1e-9 * ng.norm(dim=1, keepdim=True) * size[:, None])
+    eg, okg = _chord(w, dw, 1e-9 * nf.norm(dim=1, keepdim=True) * size[:, None])
+    u = torch.linalg.cross(nf, ng)                                          # along the common line
+    tf, tg = (ef * u[:, None]).sum(-1), (eg * u[:, None]).sum(-1)           # (N, 2) positions along it
+    lo_f, hi_f = tf.argmin(1), tf.argmax(1)
+    lo_g, hi_g = tg.argmin(1), tg.argmax(1)
+    take = lambda e, k: e.gather(1, k[:, None, None].expand(-1, 1, 3))[:, 0]
+    t_lo_f, t_lo_g = tf.gather(1, lo_f[:, None])[:, 0], tg.gather(1, lo_g[:, None])[:, 0]
+    t_hi_f, t_hi_g = tf.gather(1, hi_f[:, None])[:, 0], tg.gather(1, hi_g[:, None])[:, 0]
+    start = torch.where((t_lo_f >= t_lo_g)[:, None], take(ef, lo_f), take(eg, lo_g))   # the later start
+    end = torch.where((t_hi_f <= t_hi_g)[:, None], take(ef, hi_f), take(eg, hi_g))     # the earlier end
+    ok = okf & okg & (torch.minimum(t_hi_f, t_hi_g) > torch.maximum(t_lo_f, t_lo_g))
+    return torch.stack([start, end], 1), ok
+
+
+def _clip_segments_near(ends, near):
+    """Camera-space segments (N, 2, 3) cut to z >= near: the new ends (N, 2, 3), and which segments keep a
+    part of positive length in front (N,)."""
+    a, b = ends[:, 0], ends[:, 1]
+    dz = b[:, 2] - a[:, 2]
+    t = ((near - a[:, 2]) / torch.where(dz == 0, torch.ones_like(dz), dz)).clamp(0, 1)
+    cut = a + t[:, None] * (b - a)                                          # where the segment meets z = near
+    cut[:, 2] = near
+    a2 = torch.where((a[:, 2] < near)[:, None], cut, a)
+    b2 = torch.where((b[:, 2] < near)[:, None], cut, b)
+    front = (ends[..., 2] >= near).any(1) & ((b2 - a2).abs().amax(1) > 0)
+    return torch.stack([a2, b2], 1), front
 
 
 def _back_faces_hidden(prob, weld) -> bool:
@@ -181,9 +282,9 @@ def _back_faces_hidden(prob, weld) -> bool:
     pos = torch.searchsorted(sorted_key, twin).clamp(max=sorted_key.numel() - 1)
     if not torch.equal(sorted_key[pos], twin):
         return False
-    cam = prob.camera0
+    cam = prob.camera0.to(dtype=torch.float64)
     verts = prob.params["verts"].double()
-    if (cam.to_camera(verts.to(cam.dtype)).double()[:, 2] <= cam.near).any():
+    if (cam.to_camera(verts)[:, 2] <= cam.near).any():
         return False
     label = torch.arange(V, device=faces.device)                            # connected pieces: min label,
     for _ in range(V):                                                      # spread and jumped to a fixpoint
@@ -271,7 +372,7 @@ def _pixel_segments(a, b, W, H):
     mid = a[e] + ((s0 + s1) / 2)[:, None] * (b[e] - a[e])
     col, row = torch.floor(mid[:, 0]), torch.floor(mid[:, 1])
     inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
-    return _split_at_crossings(a, b, s0[inside], s1[inside], e[inside], (row * W + col)[inside].long())
+    return s0[inside], s1[inside], e[inside], (row * W + col)[inside].long()
 
 
 def _split_at_crossings(a, b, s0, s1, e, pixel):
@@ -312,6 +413,64 @@ def _split_at_crossings(a, b, s0, s1, e, pixel):
     lo, hi, owner = t[:-1][same], t[1:][same], piece[:-1][same]
     keep = hi > lo
     return lo[keep], hi[keep], e[owner[keep]], pixel[owner[keep]]
+
+
+def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, budget: int = 1 << 22):
+    """(N,) bool: the pieces of edge (s0, s1 on edge e, in pixel) that are certainly hidden: one face
+    covers the whole piece (both ends strictly inside its triangle on screen) and is nearer than the
+    piece's own face at both ends (nearness is affine along the piece), by a margin. A hidden piece
+    bounds nothing visible, and where it crosses a visible piece it changes nothing there either (the face
+    hiding it is in front of it at the crossing), so it needs no cuts: with K faces in a pixel most of
+    the K² intersection lines are hidden, and cutting every piece against every other would cost (K²)².
+    planes: (F, 3) nearness planes of the faces (``_planes``); face: (E,) the face each edge lies on."""
+    N = s0.numel()
+    hidden = torch.zeros(N, dtype=torch.bool, device=s0.device)
+    if N == 0:
+        return hidden
+    W, H = cam.width, cam.height
+    with torch.no_grad():
+        st = _screen_triangles(_camera_space(mesh.verts, cam), mesh.faces, cam, culled, reach=0.0)
+        if st.face.numel() == 0:
+            return hidden
+        mask = torch.zeros(H * W, dtype=torch.bool, device=s0.device)
+        mask[pixel] = True
+        pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)             # the faces of each pixel
+        order = torch.argsort(pixel)                                        # pieces grouped by pixel
+        sorted_pix = pixel[order]
+        first = torch.searchsorted(sorted_pix, pair_pix)
+        count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+        d = b - a
+        ends = [a[e] + s[:, None] * d[e] for s in (s0, s1)]                 # (N, 2) each
+        own = [(planes[face[e]] * torch.cat([x, torch.ones_like(x[:, :1])], 1)).sum(1) for x in ends]
+        q0, qx, qy = _plane(st)
+        far = -cam.far if cam.orthographic else 1 / cam.far
+        xy = st.xy
+        area_sign = 1.0                                                     # st triangles: positive area
+        size = (xy.amax(1) - xy.amin(1)).amax(1)                            # (T,) for the margins
+        ends_cum = torch.cumsum(count, 0)
+        lo = 0
+        while lo < pair_pix.numel():                                        # about ``budget`` tests at a time
+            hi = int(torch.searchsorted(ends_cum, ends_cum[lo] - count[lo] + budget, right=True).clamp(min=lo + 1))
+            c = count[lo:hi]
+            pair = torch.repeat_interleave(torch.arange(lo, hi, device=s0.device), c)
+            k = order[first[pair] + (torch.arange(pair.numel(), device=s0.device)
+                                     - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]   # the piece
+            t = tri[pair]                                                   # the face that may hide it
+            cover = torch.ones_like(k, dtype=torch.bool)
+            for x, n_own in zip(ends, own):
+                px, py = x[k, 0], x[k, 1]
+                for j in range(3):                                          # strictly inside, by a margin
+                    ax, ay = xy[t, j, 0], xy[t, j, 1]
+                    bx, by = xy[t, (j + 1) % 3, 0], xy[t, (j + 1) % 3, 1]
+                    ef = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+                    cover &= ef * area_sign > 1e-9 * size[t] * ((bx - ax).abs() + (by - ay).abs())
+                q = q0[t] + qx[t] * px + qy[t] * py
+                n = -q if cam.orthographic else q                           # larger = nearer
+                n_k = n_own[k]
+                cover &= (n > n_k + 1e-9 * n_k.abs()) & (n >= far)
+            hidden[k[cover]] = True
+            lo = hi
+    return hidden
 
 
 def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1 << 21):
@@ -400,6 +559,12 @@ def _boundary_points(prob, p, order, samples, generator):
     length = (bd - ad).norm(dim=1)
     if order is not None:
         s0, s1, e, pix = _pixel_segments(ad, bd, W, H)
+        mesh, cam = prob.mesh(p), prob.camera(p)
+        with torch.no_grad():
+            planes = _planes(cam.to_camera(mesh.verts.detach()), prob.faces, cam.K.detach(), cam.orthographic)
+        hidden = _hidden_pieces(mesh, cam, edges.culled, planes, edges.face, ad, bd, s0, s1, e, pix)
+        s0, s1, e, pix = s0[~hidden], s1[~hidden], e[~hidden], pix[~hidden]
+        s0, s1, e, pix = _split_at_crossings(ad, bd, s0, s1, e, pix)
         x, w = np.polynomial.legendre.leggauss(int(order))
         x = torch.as_tensor(x, dtype=s0.dtype, device=s0.device)
         w = torch.as_tensor(w, dtype=s0.dtype, device=s0.device)
@@ -440,41 +605,50 @@ def _side_offset(gap):
 
 def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
-    differentiated by autograd through the edges' screen positions (see the module docstring)."""
+    differentiated by autograd through the edges' screen positions (see the module docstring).
+
+    Everything is evaluated in float64 whatever the problem's dtype: the visibility samples sit 1e-6 px
+    beside an edge, below float32's resolution a few pixels from the origin, so a float32 problem is cast
+    up (differentiably) and its gradient cast back. A float32 scene then gets the float64 answer for its own
+    (float32) numbers."""
     p = prob.leaves(names)
+    targets = prob.targets(p, names)
+    p = {k: v.double() for k, v in p.items()}                              # the same parameters, in float64
     edges, e, s, weight, pix, gap = _boundary_points(prob, p, order, samples, generator)
     a, b, n, face, vid = edges.a, edges.b, edges.n, edges.face, edges.vid
-    leaves = [p[k] for k in names]
     if e.numel() == 0:
-        return tuple(torch.zeros_like(x) for x in leaves)
+        return prob.gradients((None,) * len(names), targets, names)
     mesh, cam = prob.mesh(p), prob.camera(p)
     with torch.no_grad():
         x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
         step = _side_offset(gap)[:, None] * n[e]                            # beside the edge, either side
         inside, outside = _visible_at(mesh, cam, torch.cat([x - step, x + step]), edges.culled).chunk(2)
         colors = p["colors"].detach()
-        w = prob.weights.reshape(-1, 3)[pix]
+        background = prob.background.double()
+        w = prob.weights.double().reshape(-1, 3)[pix]
         ends = vid[e]
         if prob.model == "affine":                                          # each face's colour field at x
-            field = _Field(prob.params["verts"], prob.faces, prob.camera(prob.params))
+            params = {k: v.double() for k, v in prob.params.items()}
+            field = _Field(params["verts"], prob.faces, prob.camera(params))
             color_of = lambda f: field.colors(f.clamp(min=0), torch.zeros_like(f), x, colors)
         else:
             color_of = lambda f: colors[f.clamp(min=0)]
 
-        def term(owner, inner, outer):
+        def term(owner, partner, inner, outer):
             """(N,) w · (c_owner - c_outer), where the owner shows on its inner side, halved when the face
-            beyond also has this edge (it finds the same boundary from its side)."""
-            c_out = torch.where((outer >= 0)[:, None], color_of(outer), prob.background)
+            beyond also has this edge (it finds the same boundary from its side): the partner the edge was
+            merged with (``_merge_twins``), or a face with both end vertices (an edge of three faces)."""
+            c_out = torch.where((outer >= 0)[:, None], color_of(outer), background)
             beyond = prob.weld[prob.faces[outer.clamp(min=0)]]              # (N, 3)
-            shared = (outer >= 0) & (ends >= 0).all(1) & (beyond == ends[:, :1]).any(1) & \
-                (beyond == ends[:, 1:]).any(1)
+            shared = (outer >= 0) & ((outer == partner) | ((ends >= 0).all(1) & (beyond == ends[:, :1]).any(1)
+                                                          & (beyond == ends[:, 1:]).any(1)))
             t = (w * (color_of(owner) - c_out)).sum(1) * torch.where(shared, 0.5, 1.0)
             return torch.where((owner >= 0) & (inner == owner), t, torch.zeros_like(t))
 
-        value = term(face[e], inside, outside)                              # the edge's face
-        twin, fold = edges.twin[e], edges.fold[e]                           # the face sharing it: same samples,
-        value = value + torch.where(fold, term(twin, inside, outside),      # its normal along n (a fold) or
-                                    -term(twin, outside, inside))           # against it
+        own, twin, fold = face[e], edges.twin[e], edges.fold[e]            # the face sharing the edge: same
+        value = term(own, twin, inside, outside)                            # samples, its normal along n (a
+        value = value + torch.where(fold, term(twin, own, inside, outside),   # fold) or against it
+                                    -term(twin, own, outside, inside))
         value = value * weight
     keep = (value != 0).nonzero().squeeze(1)
     e, s, value = e[keep], s[keep], value[keep]
@@ -484,28 +658,28 @@ def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     surrogate = (value[m] * (xq * n[e[m]]).sum(1)).sum()                    # d/dπ = Σ value · v_n
     if (~m).any():                                                          # intersection lines: where
         k = e[~m]                                                           # n_f - n_g = 0, moving at
-        cam = prob.camera(p)                                                # v_n = ∂(n_f - n_g)/∂π / |∇|
-        planes = _planes(cam.to_camera(p["verts"]), prob.faces, cam.K, cam.orthographic)
+        planes = _planes(cam.to_camera(p["verts"]), prob.faces, cam.K, cam.orthographic)   # v_n = ∂(n_f - n_g)/∂π / |∇|
         L = planes[face[k]] - planes[edges.other[k - edges.n_edges]]        # (N, 3)
         x = (a[k] + s[~m, None] * (b[k] - a[k])).detach()
         size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
         surrogate = surrogate + (value[~m] * (L[:, 0] * x[:, 0] + L[:, 1] * x[:, 1] + L[:, 2]) / size).sum()
-    if prob.model == "affine":                                          # the interior term: the colour field
+    if prob.model == "affine":                                              # the interior term: the colour field
         surrogate = surrogate + _interior(prob, p)                          # moves under fixed pieces
-    if not surrogate.requires_grad:
-        return tuple(torch.zeros_like(x) for x in leaves)
-    g = torch.autograd.grad(surrogate, leaves, allow_unused=True)
-    return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+    grads = torch.autograd.grad(surrogate, targets, allow_unused=True) if surrogate.requires_grad else \
+        (None,) * len(targets)
+    return prob.gradients(grads, targets, names)
 
 
 def _interior(prob, p):
     """``Σ w · area · c(centroid; π)`` over the visible pieces, with the pieces' areas and centroids held
-    fixed: its derivative is ``∫ ∂c/∂π`` over each piece, exact since ∂c/∂π is affine on screen too."""
+    fixed: its derivative is ``∫ ∂c/∂π`` over each piece, exact since ∂c/∂π is affine on screen too.
+    p: the parameters in float64."""
     mesh, cam = prob.mesh(p), prob.camera(p)
+    params = {k: v.double() for k, v in prob.params.items()}
     with torch.no_grad():
-        pieces = list(_region_chunks(mesh.verts.detach(), mesh.faces, prob.camera(prob.params), prob.dtype))
+        pieces = list(_region_chunks(mesh.verts.detach(), mesh.faces, prob.camera(params), torch.float64))
     field = _Field(mesh.verts, mesh.faces, cam)
-    w = prob.weights.reshape(-1, 3)
+    w = prob.weights.double().reshape(-1, 3)
     total = 0.0
     for r in pieces:
         if r.pixel.numel():

@@ -162,13 +162,17 @@ def _pad(poly, width):
     return poly if extra <= 0 else torch.cat([poly, poly[:, -1:].expand(-1, extra, -1)], 1)
 
 
-def _clip_rows(poly, count, s, inside=None, tol=0.0):
+def _clip_rows(poly, count, s, inside=None, tol=0.0, on=None, lines=None, line=None):
     """``clip_polygon`` on N padded convex polygons at once, keeping the part where s >= 0.
 
     poly: (N, M, D) points (D = 2 on screen, 3 in camera space), slots past count repeating the last vertex;
     count: (N,); s: (N, M) the value at each vertex of a function affine along the edges; inside: optional
     (N, M) bool decisions to use instead of ``s >= 0``; tol: an edge whose two ends have ``|s| <= tol`` lies
-    on the line. Returns (N, M', D) and the new counts (N,).
+    on the line (on: (N, M) bool, those vertices, given instead). Returns (N, M', D) and the new counts (N,).
+    lines: optional (N, M, 3), the line each edge k → k+1 lies on, and line (N, 3) the clipping line: then
+    the clipped polygon's edge lines come back too, (N, M', 3) (a kept vertex keeps its edge; a crossing
+    starts an edge along the clipping line where the polygon leaves the half-plane, along its own edge where
+    it enters).
     Every vertex emits itself (if inside) and its edge's crossing (if the edge changes side); a cumulative sum
     gives each emitted point its output slot.
 
@@ -190,11 +194,13 @@ def _clip_rows(poly, count, s, inside=None, tol=0.0):
     ins = s >= 0 if inside is None else inside
     keep = real & ins
     cross = real & (ins != ins.gather(1, nxt))
-    on = s.detach().abs() <= tol
+    on = s.detach().abs() <= tol if on is None else on
     cross_at = cross & ~(on & on.gather(1, nxt))                            # not an edge along the line (t = 0)
     denom = s - s.gather(1, nxt)
     denom = torch.where(cross_at & (denom != 0), denom, torch.ones_like(denom))   # guarded: no 0/0, even unused
-    t = torch.where(cross_at, s / denom, torch.zeros_like(s)).clamp(0, 1)
+    t = torch.where(cross_at, s / denom, torch.zeros_like(s))
+    t = t + (t.detach().clamp(0, 1) - t.detach())                           # kept on the edge, derivative kept:
+    # at a tie (a vertex on the line) rounding can put t a hair outside [0, 1]; clamp's derivative would be 0
     hit = poly + t[..., None] * (_take(poly, nxt) - poly)                   # (N, M, D) crossings
     cand = torch.stack([poly, hit], 2).reshape(N, 2 * M, D)
     emit = torch.stack([keep, cross], 2).reshape(N, 2 * M)
@@ -204,7 +210,13 @@ def _clip_rows(poly, count, s, inside=None, tol=0.0):
     src = torch.zeros(N, width + 1, dtype=torch.int64, device=poly.device)
     src.scatter_(1, slot, torch.arange(2 * M, device=poly.device).expand(N, -1))
     last = torch.minimum(torch.arange(width, device=poly.device), (new_count - 1).clamp(min=0)[:, None])
-    return _take(cand, src.gather(1, last)), new_count
+    which = src.gather(1, last)
+    if lines is None:
+        return _take(cand, which), new_count
+    enters = ins.gather(1, nxt)                                             # the edge's end is inside
+    hit_line = torch.where(enters[..., None], lines, line[:, None, :].expand_as(lines))
+    cand_lines = torch.stack([lines, hit_line], 2).reshape(N, 2 * M, 3)
+    return _take(cand, which), new_count, _take(cand_lines, which)
 
 
 def _areas(poly):
@@ -340,7 +352,7 @@ def _pixel_chunks(pixel, size):
         lo = hi
 
 
-def _plan(verts, faces, camera) -> _Plan:
+def _plan(verts, faces, camera, shift: bool = False) -> _Plan:
     H, W, F = camera.height, camera.width, faces.shape[0]
     vc = raster._camera_space(verts, camera)                                # (V, 3) float64, detached
     st = raster._screen_triangles(vc, faces, camera, False, reach=0.0)
@@ -357,7 +369,7 @@ def _plan(verts, faces, camera) -> _Plan:
     d = geo.xy.roll(-1, 1) - geo.xy
     edge_ok = d.abs().amax(-1) > 1e-12 * (1 + geo.xy.abs().amax(-1))
     far = vc[faces[used]][..., 2].amax(-1) > camera.far
-    kept = [_hide(pixel[lo:hi], face[lo:hi], face_id[lo:hi], geo, edge_ok, far, camera)
+    kept = [_hide(pixel[lo:hi], face[lo:hi], face_id[lo:hi], geo, edge_ok, far, camera, shift)
             for lo, hi in _pixel_chunks(pixel, 4 * CHUNK)]
     pixel, face, covers = (torch.cat(x) for x in zip(*kept)) if kept else (pixel, face, face > 0)
     _, size = _groups(pixel)
@@ -367,10 +379,12 @@ def _plan(verts, faces, camera) -> _Plan:
                  size[rest], pixel[full], face[full])
 
 
-def _hide(pixel, face, face_id, geo, edge_ok, far, camera):
+def _hide(pixel, face, face_id, geo, edge_ok, far, camera, shift):
     """Step 3 on pairs of whole pixels: order each pixel's faces nearest first (at its centre) and drop the
     faces that a face covering the whole square hides. Returns the kept pixel, face and covers (R',)."""
     corner = _corners(pixel, camera.width)                                  # (R, 4, 2)
+    if shift:                                                               # as the decision copy sees them
+        corner = corner - corner.new_tensor(TIE_SHIFT)                      # (_Pieces: ties)
     lines = _edge_lines(geo.xy).index_select(0, face)                       # (R, 4, 3)
     covers = ((_values(lines, corner) >= 0) | ~edge_ok[face][..., None]).all(-1).all(-1)
     n, scale = _nearness(geo.coef.index_select(0, face), corner)            # (R, 4)
@@ -393,11 +407,96 @@ def _hide(pixel, face, face_id, geo, edge_ok, far, camera):
 # ------------------------------------------------------------------- step 4: pieces, differentiably
 
 TRUE = (0.0, 0.0, 1.0)   # a line that holds everywhere: a half-plane that is not there
+TIE_SHIFT = (1e-9, 0.7548776662466927e-9)   # pixels: where the decisions see the scene (see _Pieces)
 
 
 def _tol(dtype):
     """Distances (pixels) below this are rounding: a vertex this close to a line is on it."""
     return max(1e-12, 16 * torch.finfo(dtype).eps)
+
+
+@dataclass
+class _Pieces:
+    """A batch of convex pieces, pixel-relative: ``poly`` (N, M, 2) the values autograd differentiates (in
+    the working dtype), ``count`` (N,) and ``owner`` (N,) the (pixel, face) pair each belongs to.
+
+    With a gradient wanted, two more: ``dec`` (N, M, 2), a float64 copy that takes every decision, and
+    ``lines`` (N, M, 3), the line each edge lies on. Why. The image is continuous, but where a line of the
+    scene lies exactly on a pixel border or a vertex sits exactly on a pixel corner (a symmetric scene, a
+    square on the pixel grid, a line through the image centre) each pixel's value has a kink: moving the
+    line left changes one pixel, moving it right the other. Autograd differentiates whichever arrangement
+    the clipping chose, pixel by pixel, and rounding noise can choose one side in one pixel and the other in
+    its neighbour: a derivative that belongs to no motion at all. So every decision (which side of a line a
+    vertex is on, whether a piece is empty) is taken on ``dec``, the scene shifted by ``TIE_SHIFT`` (1e-9 px
+    right, 0.75e-9 px down) against the pixel squares; the values follow the same decisions unshifted. A
+    line on a border then belongs to the pixel on its right (or below), as the half-open pixels [j, j+1) of
+    the conventions say, in every pixel at once: the derivative is the one-sided one for moving the scene
+    toward +x, +y on screen. Pieces that are empty in the values but not in ``dec`` (a line on a border
+    bounds a sliver of width 0 that grows as it moves) are kept, and at the end each vertex takes the
+    derivative of the crossing of its two edges' lines (``_vertex_derivatives``): where several lines meet
+    at one point (a vertex on a pixel corner) the values' edges between them have length 0 and an
+    interpolation along them would lose how the point moves. Without a gradient the values decide."""
+    poly: torch.Tensor
+    count: torch.Tensor
+    owner: torch.Tensor
+    dec: torch.Tensor | None = None
+    lines: torch.Tensor | None = None
+
+    def take(self, idx) -> "_Pieces":
+        pick = lambda x: None if x is None else x[idx]
+        return _Pieces(self.poly[idx], self.count[idx], self.owner[idx], pick(self.dec), pick(self.lines))
+
+    def decide(self):
+        """The points decisions are taken on: the decision copy, or the values themselves."""
+        return self.poly.detach() if self.dec is None else self.dec
+
+    def clip(self, s, s_dec, line, tol, inside=None) -> "_Pieces":
+        """The part where s >= 0 (values s (N, M), decision values s_dec or None, the line (N, 3) in the
+        values' frame): both copies clipped alike, with the decision copy's sides (or ``inside``) and its
+        notion of a vertex lying on the line (``_clip_rows``)."""
+        d = s.detach() if s_dec is None else s_dec
+        inside = d >= 0 if inside is None else inside
+        on = d.abs() <= tol
+        if self.dec is None:
+            poly, count = _clip_rows(self.poly, self.count, s, inside, on=on)
+            return _Pieces(poly, count, self.owner)
+        poly, count, lines = _clip_rows(self.poly, self.count, s, inside, on=on, lines=self.lines, line=line)
+        dec, _ = _clip_rows(self.dec, self.count, s_dec, inside, on=on)
+        return _Pieces(poly, count, self.owner, dec, lines)
+
+    def keep(self, tol) -> "_Pieces":
+        """Drop pieces with fewer than 3 vertices or no area (as the decision copy sees it)."""
+        return self.take(((self.count >= 3) & (_areas(self.decide()) > tol * tol)).nonzero().squeeze(1))
+
+    @staticmethod
+    def cat(parts) -> "_Pieces":
+        width = max(p.poly.shape[1] for p in parts)
+        join = lambda xs: None if xs[0] is None else torch.cat([_pad(x, width) for x in xs])
+        return _Pieces(join([p.poly for p in parts]), torch.cat([p.count for p in parts]),
+                       torch.cat([p.owner for p in parts]), join([p.dec for p in parts]),
+                       join([p.lines for p in parts]))
+
+
+def _vertex_derivatives(pieces: _Pieces):
+    """The pieces' vertices (N, M, 2) with the values of ``poly`` and, where the two lines through a vertex
+    cross at an angle (sin > 1e-6), the derivative of their crossing point (``_Pieces``: why)."""
+    poly, lines, count = pieces.poly, pieces.lines, pieces.count
+    if lines is None or poly.shape[0] == 0:
+        return poly
+    M = poly.shape[1]
+    k = torch.arange(M, device=poly.device)
+    prev = torch.where(k > 0, k - 1, count[:, None] - 1).clamp(min=0)       # the edge into vertex k
+    l1, l2 = _take(lines, prev), lines                                      # (N, M, 3) each
+    det = l1[..., 0] * l2[..., 1] - l2[..., 0] * l1[..., 1]
+    size = l1[..., :2].norm(dim=-1) * l2[..., :2].norm(dim=-1)
+    good = (det.detach().abs() > 1e-6 * size.detach()) & (k < count[:, None])
+    det = torch.where(good, det, torch.ones_like(det))
+    x = (l1[..., 1] * l2[..., 2] - l2[..., 1] * l1[..., 2]) / det
+    y = (l2[..., 0] * l1[..., 2] - l1[..., 0] * l2[..., 2]) / det
+    cross = torch.stack([x, y], -1)
+    out = torch.where(good[..., None], poly.detach() + (cross - cross.detach()), poly)
+    last = torch.minimum(k, (count - 1).clamp(min=0)[:, None])              # padding repeats the last vertex
+    return _take(out, last)
 
 
 def _distances(line, poly):
@@ -406,20 +505,36 @@ def _distances(line, poly):
     return _values(line[:, None], poly)[:, 0] / norm[:, None]
 
 
-def _square_piece(geo, plan, pixel, face, camera, dtype):
-    """Each pair's piece f ∩ square ∩ {z <= far}, pixel-relative: (R, M, 2), counts (R,)."""
+SQUARE = ((1.0, 0.0, 0.0), (-1.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.0, -1.0, 1.0))   # u >= 0, u <= 1, v >= 0, v <= 1
+
+
+def _square_piece(geo, plan, pixel, face, camera, dtype, shift):
+    """Each pair's piece f ∩ square ∩ {z <= far}, pixel-relative, as ``_Pieces`` (owner: the pair's index),
+    and the pixels' corners (R, 2) for the values and for the decisions (``None`` without the shifted copy)."""
     W = camera.width
     corner = torch.stack([pixel % W, pixel // W], -1).to(geo.xy.dtype)      # (R, 2)
     poly, count = (geo.xy[face] - corner[:, None]).to(dtype), geo.count[face]   # pixel-relative, then dtype
-    for axis, sign in ((0, 1), (0, -1), (1, 1), (1, -1)):                   # u >= 0, u <= 1, v >= 0, v <= 1
-        u = poly[..., axis]
-        poly, count = _clip_rows(poly, count, u if sign > 0 else 1 - u, tol=_tol(dtype))
+    owner = torch.arange(pixel.numel(), device=pixel.device)
+    corner_dec = corner - corner.new_tensor(TIE_SHIFT) if shift else None
+    if shift:
+        pieces = _Pieces(poly, count, owner, geo.xy[face].detach() - corner_dec[:, None], _edge_lines(poly))
+    else:
+        pieces = _Pieces(poly, count, owner)
+    tol = _tol(torch.float64 if shift else dtype)
+    for line in SQUARE:
+        line = poly.new_tensor(line).expand(poly.shape[0], 3)
+        s = _values(line[:, None], pieces.poly)[:, 0]
+        s_dec = None if not shift else _values(line[:, None].double(), pieces.dec)[:, 0]
+        pieces = pieces.clip(s, s_dec, line, tol)
     far = plan.far[face]
     if bool(far.any()):
-        line = (_local(geo.coef[face], corner) - corner.new_tensor([0.0, 0.0, _far_value(camera)])).to(dtype)
-        s = _distances(line, poly)
-        poly, count = _clip_rows(poly, count, torch.where(far[:, None], s, torch.ones_like(s)), tol=_tol(dtype))
-    return poly, count, corner
+        def far_line(c):
+            line = _local(geo.coef[face], c) - c.new_tensor([0.0, 0.0, _far_value(camera)])
+            return torch.where(far[:, None], line, line.new_tensor(TRUE))
+        line = far_line(corner).to(dtype)
+        s_dec = None if not shift else _distances(far_line(corner_dec).detach(), pieces.dec)
+        pieces = pieces.clip(_distances(line, pieces.poly), s_dec, line, tol)
+    return pieces, corner, corner_dec
 
 
 def _occluder_lines(geo, plan, f, g, corner, camera, cop, dtype):
@@ -448,63 +563,59 @@ def _classify(poly, lines, g_poly, tol):
     return separated, inside & ~separated
 
 
-def _subtract(poly, count, lines, tol):
-    """Convex pieces (rows, M, 2) minus the convex regions given by lines (rows, 6, 3): the disjoint pieces
-    piece ∩ ¬H1, piece ∩ H1 ∩ ¬H2, ... Returns pieces, counts and the row each came from.
+def _subtract(pieces: _Pieces, lines, lines_dec, tol):
+    """Convex pieces minus the convex regions given by lines (rows, 6, 3) (lines_dec: the same for the
+    decision copy, or None): the disjoint pieces piece ∩ ¬H1, piece ∩ H1 ∩ ¬H2, ... Returns a list of
+    ``_Pieces`` whose ``owner`` is the row each came from.
 
     The values are distances, so tol (pixels) tells an edge that lies on Hh's line (a shared edge of two
     occluders, a crossing through a mesh vertex) from one that crosses it (``_clip_rows``)."""
-    rows = torch.arange(poly.shape[0], device=poly.device)
+    rows = torch.arange(pieces.poly.shape[0], device=pieces.poly.device)
+    pieces = _Pieces(pieces.poly, pieces.count, rows, pieces.dec, pieces.lines)
     out = []
     for h in range(lines.shape[1]):
-        s = _distances(lines[:, h], poly)                                   # (rows, M) signed distances
-        real = torch.arange(poly.shape[1], device=s.device) < count[:, None]
-        cut = ((s.detach() < 0) & real).any(1)
+        s = _distances(lines[:, h], pieces.poly)                            # (rows, M) signed distances
+        s_dec = None if lines_dec is None else _distances(lines_dec[:, h], pieces.dec)
+        d = s.detach() if s_dec is None else s_dec
+        real = torch.arange(pieces.poly.shape[1], device=s.device) < pieces.count[:, None]
+        cut = ((d < 0) & real).any(1)
         if not bool(cut.any()):
             continue                                                        # nothing outside Hh: no piece
         i = cut.nonzero().squeeze(1)
-        inside = s[i].detach() >= 0
-        o, oc = _clip_rows(poly[i], count[i], -s[i], ~inside, tol)          # piece ∩ ¬Hh
-        out.append((o, oc, rows[i]))
-        c, cc = _clip_rows(poly[i], count[i], s[i], inside, tol)            # continue with piece ∩ Hh
-        width = max(c.shape[1], poly.shape[1])
-        poly = _pad(poly, width).index_copy(0, i, _pad(c, width))
-        count = count.index_copy(0, i, cc)
+        inside = d[i] >= 0
+        part = pieces.take(i)
+        neg = None if s_dec is None else -s_dec[i]
+        out.append(part.clip(-s[i], neg, -lines[i, h], tol, ~inside))      # piece ∩ ¬Hh
+        rest = part.clip(s[i], None if s_dec is None else s_dec[i], lines[i, h], tol, inside)   # go on in Hh
+        width = max(rest.poly.shape[1], pieces.poly.shape[1])
+        put = lambda x, y: None if x is None else _pad(x, width).index_copy(0, i, _pad(y, width))
+        pieces = _Pieces(put(pieces.poly, rest.poly), pieces.count.index_copy(0, i, rest.count), pieces.owner,
+                         put(pieces.dec, rest.dec), put(pieces.lines, rest.lines))
     return out
 
 
-def _keep(poly, count, owner, tol):
-    """Drop pieces with fewer than 3 vertices or no area."""
-    ok = ((count >= 3) & (_areas(poly).detach() > tol * tol)).nonzero().squeeze(1)
-    return poly[ok], count[ok], owner[ok]
-
-
-def _cat(parts):
-    width = max(p.shape[1] for p, _, _ in parts)
-    return (torch.cat([_pad(p, width) for p, _, _ in parts]), torch.cat([c for _, c, _ in parts]),
-            torch.cat([o for _, _, o in parts]))
-
-
-def _chunk_pieces(geo, plan, lo, hi, camera, dtype):
-    """The visible pieces of the pairs lo:hi of the plan (whole pixels). Returns poly, count, pair index."""
+def _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift):
+    """The visible pieces of the pairs lo:hi of the plan (whole pixels). Returns poly, count, pair index.
+    shift: take the decisions on a shifted float64 copy (``_Pieces``), for a gradient."""
     pixel, face, size = plan.pixel[lo:hi], plan.face[lo:hi], plan.size[lo:hi]
     start = _groups(pixel)[0]
-    tol = _tol(dtype)
-    poly, count, corner = _square_piece(geo, plan, pixel, face, camera, dtype)
-    poly, count, owner = _keep(poly, count, torch.arange(pixel.numel(), device=pixel.device), tol)
+    pieces, corner, corner_dec = _square_piece(geo, plan, pixel, face, camera, dtype, shift)
+    tol = _tol(torch.float64 if shift else dtype)
+    pieces = pieces.keep(tol)
     corner64 = _corners(pixel, camera.width)
     n, scale = _nearness(plan.geo.coef[face], corner64)                     # (R, 4) at the pixel's corners
     g_lo, g_hi = plan.lo[face] - corner64[:, 0], plan.hi[face] - corner64[:, 0]   # (R, 2) relative bbox
     done = []                                                               # pieces whose pixel has no more faces
     for j in range(int(size.max()) if size.numel() else 0):                # the j-th face of every pixel
-        live = j < size[owner]
+        live = j < size[pieces.owner]
         if not bool(live.all()):
-            done.append((poly[~live], count[~live], owner[~live]))
-            poly, count, owner = poly[live], count[live], owner[live]
+            done.append(pieces.take(~live))
+            pieces = pieces.take(live)
+        owner = pieces.owner
         pos = start[owner] + j                                              # the pair (pixel, g)
         i = (pos != owner).nonzero().squeeze(1)
         a, b = owner[i], pos[i]
-        box = poly[i].detach()                                              # g misses the piece's bbox
+        box = pieces.decide()[i]                                            # g misses the piece's bbox
         skip = ((g_hi[b] < box.amin(1) - 1e-4) | (g_lo[b] > box.amax(1) + 1e-4)).any(-1)   # (a loose test)
         cop = _coplanar(n[a], scale[a], n[b], scale[b])                     # or g is behind f everywhere
         skip |= torch.where(cop, plan.used[face[b]] > plan.used[face[a]], (n[b] < n[a]).all(-1))
@@ -513,17 +624,27 @@ def _chunk_pieces(geo, plan, lo, hi, camera, dtype):
             continue
         f, g = face[owner], face[pos]
         lines = _occluder_lines(geo, plan, f[i], g[i], corner[owner[i]], camera, cop, dtype)
-        g_poly = (geo.xy[g[i]] - corner[owner[i]][:, None]).to(dtype)
-        with torch.no_grad():
-            separated, inside = _classify(poly[i].detach(), lines.detach(), g_poly.detach(), tol)
+        with torch.no_grad():                                               # the decisions
+            if shift:
+                c = corner_dec[owner[i]]
+                lines_dec = _occluder_lines(geo, plan, f[i], g[i], c, camera, cop, torch.float64)
+                g_poly = geo.xy[g[i]] - c[:, None]
+            else:
+                lines_dec = None
+                g_poly = (geo.xy[g[i]] - corner[owner[i]][:, None]).to(dtype)
+            separated, inside = _classify(pieces.decide()[i], lines.detach() if lines_dec is None else lines_dec,
+                                          g_poly, tol)
         same = torch.ones_like(owner, dtype=torch.bool)
         same[i[~separated]] = False
-        parts = [(poly[same], count[same], owner[same])]                    # untouched by g
-        split = i[~separated & ~inside]                                     # (pieces inside D are gone)
-        for o, oc, r in _subtract(poly[split], count[split], lines[~separated & ~inside], tol):
-            parts.append(_keep(o, oc, owner[split][r], tol))
-        poly, count, owner = _cat(parts)
-    return _cat(done + [(poly, count, owner)])
+        parts = [pieces.take(same)]                                         # untouched by g
+        sel = ~separated & ~inside                                          # (pieces inside D are gone)
+        split = i[sel]
+        for part in _subtract(pieces.take(split), lines[sel], None if lines_dec is None else lines_dec[sel], tol):
+            part.owner = owner[split][part.owner]
+            parts.append(part.keep(tol))
+        pieces = _Pieces.cat(parts)
+    pieces = _Pieces.cat(done + [pieces])
+    return _vertex_derivatives(pieces), pieces.count, pieces.owner
 
 
 # ------------------------------------------------------------------------------------------ public API
@@ -531,8 +652,9 @@ def _chunk_pieces(geo, plan, lo, hi, camera, dtype):
 def _region_chunks(verts, faces, camera, dtype):
     """The visible pieces chunk by chunk: one ``VisibleRegions`` for the pixels a single face covers, then
     one per chunk of at most about ``CHUNK`` (pixel, face) pairs."""
+    shift = torch.is_grad_enabled() and any(x.requires_grad for x in (verts, camera.K, camera.R, camera.t))
     with torch.no_grad():
-        plan = _plan(verts, faces, camera)
+        plan = _plan(verts, faces, camera, shift)                           # (shift: _Pieces, ties)
     # per-face geometry in float64 (one row per face: cheap), the pieces in dtype once pixel-relative
     verts_cam = world_to_camera(verts.double(), camera.R.double(), camera.t.double())   # (V, 3)
     geo = _face_geometry(verts_cam, faces[plan.used], camera, camera.K.double(), plan.inside, plan.flip)
@@ -541,7 +663,7 @@ def _region_chunks(verts, faces, camera, dtype):
     yield VisibleRegions(plan.full_pixel, plan.used[plan.full_face], square.expand(n_full, 4, 2),
                          torch.full_like(plan.full_pixel, 4), square.new_ones(n_full))
     for lo, hi in _pixel_chunks(plan.pixel, CHUNK):                         # chunks of whole pixels
-        poly, count, owner = _chunk_pieces(geo, plan, lo, hi, camera, dtype)
+        poly, count, owner = _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift)
         yield VisibleRegions(plan.pixel[lo:hi][owner], plan.used[plan.face[lo:hi][owner]], poly, count,
                              _areas(poly))
 

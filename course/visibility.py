@@ -94,13 +94,36 @@ class _Problem:
         self.faces, self.camera0 = faces, camera
         self.weights, self.background = w.to(self.dtype), bg.to(self.dtype)
         self.weld = _weld(verts)                                            # (V,) one id per position
+        self.n_points = int(self.weld.max()) + 1 if self.weld.numel() else 0
         self.params = {"verts": verts.detach().to(self.dtype), "R": camera.R.detach().to(self.dtype),
                        "t": camera.t.detach().to(self.dtype), "focal": camera.K[0, 0].detach().to(self.dtype),
                        "colors": c.detach().to(self.dtype)}
 
     def leaves(self, names):
-        """Fresh leaf copies of the parameters, those in ``names`` requiring grad."""
-        return {k: v.clone().requires_grad_(k in names) for k, v in self.params.items()}
+        """Fresh copies of the parameters, those in ``names`` requiring grad. The vertices are
+        ``verts + shift[weld]``: one shift (U, 3), a leaf, per welded position (``boundary._weld``), so that
+        the copies of a position (a seam) move together, as one point."""
+        p = {k: v.clone().requires_grad_(k in names) for k, v in self.params.items() if k != "verts"}
+        verts = self.params["verts"]
+        if "verts" in names:
+            p["shift"] = verts.new_zeros(self.n_points, 3).requires_grad_(True)
+            p["verts"] = verts + p["shift"][self.weld]
+        else:
+            p["verts"] = verts.clone()
+        return p
+
+    def targets(self, p, names):
+        """The leaves to differentiate for ``names``: the welded shift stands for "verts"."""
+        return [p["shift"] if n == "verts" else p[n] for n in names]
+
+    def gradients(self, grads, targets, names):
+        """Gradients w.r.t. ``targets`` (None: zero) → one per name, in the parameters' dtype; "verts" gets
+        each copy of a position the derivative of moving the position (all its copies)."""
+        out = []
+        for n, g, x in zip(names, grads, targets):
+            g = torch.zeros_like(x) if g is None else g.to(x.dtype)
+            out.append(g[self.weld] if n == "verts" else g)
+        return tuple(out)
 
     def camera(self, p, crop=None):
         """The camera of the parameters p; ``crop`` (x0, y0, w, h) keeps only those pixels."""
@@ -132,7 +155,7 @@ def exact_gradient(prob: _Problem, names):
     w = prob.weights.reshape(-1, 3)
     colors = p["colors"] - prob.background                                   # image = bg + Σ area (c - bg)
     field = _Field(mesh.verts, mesh.faces, cam) if prob.model == "affine" else None
-    leaves = [p[n] for n in names]
+    leaves = prob.targets(p, names)
     total = [torch.zeros_like(x) for x in leaves]
     for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype):
         if regions.pixel.numel() == 0:
@@ -147,7 +170,7 @@ def exact_gradient(prob: _Problem, names):
             continue
         g = torch.autograd.grad(part, leaves, retain_graph=True, allow_unused=True)
         total = [a + (b if b is not None else 0) for a, b in zip(total, g)]
-    return tuple(total)
+    return prob.gradients(total, leaves, names)
 
 
 # ---------------------------------------------------------------------------- finite differences
@@ -165,7 +188,7 @@ def _loss(prob, p, crop=None):
 def _reach(prob, p, vertex, step):
     """The pixels a move of ``vertex`` by up to ``step`` can change: the box around the projections of its
     faces (one pixel of margin, and the vertex moved by ±step), clipped to the image; None if none."""
-    faces = prob.faces[(prob.faces == vertex).any(1)]
+    faces = prob.faces[(prob.weld[prob.faces] == prob.weld[vertex]).any(1)]   # its copies' faces too
     if faces.numel() == 0:
         return None
     cam = prob.camera(p)
@@ -217,7 +240,11 @@ def fd_gradient(prob: _Problem, names, step=1e-4, scheme="central", vertices=Non
                 def at(delta):
                     p = dict(base)
                     y = x.clone()
-                    y[e] = y[e] + delta
+                    if name == "verts":                                     # the position: all its copies
+                        copies = prob.weld == prob.weld[e[0]]
+                        y[copies, e[1]] = y[copies, e[1]] + delta
+                    else:
+                        y[e] = y[e] + delta
                     p[name] = y
                     return _loss(prob, p, crop)
                 if scheme == "central":
@@ -234,9 +261,9 @@ def _other_image_gradient(prob, names, render):
     p = prob.leaves(names)
     image = render(prob.mesh(p), prob.camera(p), p["colors"], prob.background)
     loss = (prob.weights * image).sum()
-    leaves = [p[k] for k in names]
-    g = torch.autograd.grad(loss, leaves, allow_unused=True)
-    return tuple(gi if gi is not None else torch.zeros_like(x) for gi, x in zip(g, leaves))
+    leaves = prob.targets(p, names)
+    g = torch.autograd.grad(loss, leaves, allow_unused=True) if loss.requires_grad else (None,) * len(leaves)
+    return prob.gradients(g, leaves, names)
 
 
 # ------------------------------------------------------------------------------------- the front door
