@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import torch
 
 from .intersect import _slab, _watertight
-from .tensors import as_tensor
+from .tensors import _as_faces, _check_count, _check_flag, _check_shape, as_tensor
 
 __all__ = ["morton_codes", "BVH", "Hits"]
 
@@ -70,7 +70,10 @@ def _spread_bits(x):
 
 def morton_codes(points):
     """63-bit Morton codes (int64) of points (N, 3), quantised to 2^21 cells per axis of their bounding box."""
-    p = points.double()
+    p = as_tensor(points, dtype=torch.float64, name="points")
+    _check_shape(p, (None, 3), "points")
+    if p.shape[0] == 0:
+        return torch.zeros(0, dtype=torch.int64, device=p.device)
     lo, hi = p.min(0).values, p.max(0).values
     scale = torch.where(hi > lo, (2**21 - 1) / (hi - lo), torch.zeros_like(hi))
     q = ((p - lo) * scale).long().clamp(0, 2**21 - 1)                     # (N, 3)
@@ -117,21 +120,18 @@ class BVH:
 
     def __init__(self, mesh, *, leaf_size: int = 4):
         verts, faces = getattr(mesh, "verts", None), getattr(mesh, "faces", None)
+        if verts is None or faces is None:
+            raise TypeError(f"mesh must have verts (V, 3) and faces (F, 3), got {type(mesh).__name__}")
         if not isinstance(verts, torch.Tensor) or verts.dim() != 2 or verts.shape[1] != 3:
             raise ValueError(f"mesh.verts must be a (V, 3) tensor, got {getattr(verts, 'shape', type(verts))}")
-        if not isinstance(faces, torch.Tensor) or faces.dim() != 2 or faces.shape[1] != 3:
-            raise ValueError(f"mesh.faces must be an (F, 3) tensor, got {getattr(faces, 'shape', type(faces))}")
-        if int(leaf_size) < 1:
-            raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
-        verts = verts.detach()
-        if not verts.is_floating_point():
-            verts = verts.to(torch.get_default_dtype())
+        if not isinstance(faces, torch.Tensor):
+            raise ValueError(f"mesh.faces must be an (F, 3) tensor, got {type(faces).__name__}")
+        leaf_size = _check_count(leaf_size, "leaf_size")
+        verts = as_tensor(verts.detach(), name="mesh.verts")
         if not torch.isfinite(verts).all():
             raise ValueError("mesh.verts contains NaN or inf")
-        faces = faces.long()
-        if faces.numel() and (int(faces.min()) < 0 or int(faces.max()) >= verts.shape[0]):
-            raise ValueError("mesh.faces index vertices out of range")
-        self.leaf_size = int(leaf_size)
+        faces = _as_faces(faces, "mesh.faces", num_verts=verts.shape[0], device=verts.device)
+        self.leaf_size = leaf_size
         self.dtype, self.device = verts.dtype, verts.device
         F = faces.shape[0]
         tris = verts[faces]                                                 # (F, 3, 3)
@@ -223,8 +223,8 @@ class BVH:
         ``_traverse``); order coherent rays next to each other (``raycast`` orders pixels in 4 x 4 tiles).
         1 traces every ray alone. The hits do not depend on it.
         """
-        if int(packet) < 1:
-            raise ValueError(f"packet must be >= 1, got {packet}")
+        packet, chunk = _check_count(packet, "packet"), _check_count(chunk, "chunk")
+        any_hit = _check_flag(any_hit, "any_hit")
         o = as_tensor(origins, name="origins")
         d = as_tensor(directions, name="directions")
         dtype = torch.promote_types(torch.promote_types(o.dtype, d.dtype), self.dtype)
@@ -246,7 +246,7 @@ class BVH:
         verts = [tris[:, i].contiguous() for i in range(3)]                 # (F, 3) each: quick row gathers
         for s in range(0, N, chunk):
             sl = slice(s, min(s + chunk, N))
-            f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], verts, any_hit, int(packet))   # face hit
+            f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], verts, any_hit, packet)   # face hit
             ok = (f >= 0).nonzero().squeeze(1)
             if ok.numel():                                                 # the winners' t and bary, once more
                 r = ok + s
@@ -489,7 +489,10 @@ def _ranks(counts):
 
 
 def _per_ray(value, N, like, name):
-    v = torch.as_tensor(value, dtype=like.dtype, device=like.device)
+    if isinstance(value, (bool, str)) or not isinstance(value, (int, float, torch.Tensor)) and \
+            not hasattr(value, "__array__"):
+        raise ValueError(f"{name} must be a number or an (N,) tensor with N = {N}, got {value!r}")
+    v = as_tensor(value, dtype=like.dtype, device=like.device, name=name)
     if v.dim() == 0:
         v = v.expand(N)
     if v.shape != (N,):

@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from .tensors import _check_shape, as_tensor
+from .tensors import _check_count, _check_dtype, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = [
     "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
@@ -36,6 +36,7 @@ def axis_angle_to_matrix(axis_angle) -> torch.Tensor:
     w = as_tensor(axis_angle, name="axis_angle")
     if w.shape[-1:] != (3,):
         raise ValueError(f"axis_angle must have shape (..., 3), got {tuple(w.shape)}")
+    _check_finite(w, "axis_angle")
     theta2 = (w * w).sum(-1, keepdim=True)[..., None]                       # (..., 1, 1)
     small = theta2 < 1e-8
     theta2_safe = torch.where(small, torch.ones_like(theta2), theta2)
@@ -57,7 +58,7 @@ def euler_to_matrix(angles, order: str = "xyz") -> torch.Tensor:
     """
     a = as_tensor(angles, name="angles")
     _check_shape(a, (3,), "angles")
-    if sorted(order) != ["x", "y", "z"]:
+    if not isinstance(order, str) or sorted(order) != ["x", "y", "z"]:
         raise ValueError(f"order must be a permutation of 'xyz', got {order!r}")
     axes = {"x": 0, "y": 1, "z": 2}
     R = torch.eye(3, dtype=a.dtype, device=a.device)
@@ -90,6 +91,10 @@ def transform_points(M, points) -> torch.Tensor:
     _check_shape(M, (4, 4), "M")
     _check_shape(p, (None, 3), "points")
     ph = torch.cat([p, torch.ones_like(p[:, :1])], 1) @ M.T                 # (N, 4)
+    if bool((ph[:, 3] == 0).any()):
+        k = int((ph[:, 3] == 0).nonzero()[0, 0])
+        raise ValueError(f"M sends point {k} to infinity (homogeneous w = 0): points must stay off M's "
+                         "vanishing plane")
     return ph[:, :3] / ph[:, 3:]
 
 
@@ -109,6 +114,8 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)):
     if forward.norm() <= 1e-12 * max(1.0, float(eye.detach().abs().max())):
         raise ValueError("look_at: eye and target are the same point, the viewing direction is undefined")
     z = forward / forward.norm()                                            # camera +z: forward
+    if float(up.detach().norm()) == 0:
+        raise ValueError("look_at: up must be a non-zero vector, got (0, 0, 0)")
     right = torch.linalg.cross(z, up)                                       # forward × up points right
     if right.norm() <= 1e-9 * up.norm():
         raise ValueError("look_at: up is parallel to the viewing direction; choose another up vector")
@@ -129,15 +136,51 @@ def world_to_camera(points_world, R, t) -> torch.Tensor:
     return p @ R.T + t
 
 
+# Tolerances of the camera checks (see ``_check_intrinsics`` and ``Camera``).
+K_ROW_TOLERANCE = 1e-4      # |K[2] - (0, 0, 1)| per entry: far above rounding and gradcheck's steps
+ROTATION_TOLERANCE = 1e-2   # max |R Rᵀ - I|: admits the finite-difference steps (1e-3) image_gradient takes
+                            # on R's entries, refuses a scaled, sheared or transposed-K matrix
+
+
+def _check_rotation(R: torch.Tensor, name: str = "R") -> None:
+    """R (3, 3) must be a rotation: orthonormal to ``ROTATION_TOLERANCE`` and det R > 0 (detached value)."""
+    r = R.detach().double()
+    err = float((r @ r.T - torch.eye(3, dtype=torch.float64, device=r.device)).abs().max())
+    if err > ROTATION_TOLERANCE:
+        raise ValueError(f"{name} must be a rotation matrix (orthonormal rows), but R Rᵀ differs from the "
+                         f"identity by {err:.3g}: build R with look_at or axis_angle_to_matrix")
+    if float(torch.linalg.det(r)) <= 0:
+        raise ValueError(f"{name} must be a rotation, det R = +1, but det R = {float(torch.linalg.det(r)):.3g}: "
+                         "it mirrors the scene (swap two rows to fix the handedness)")
+
+
 # ------------------------------------------------------------------------------------------- projection
 
 def intrinsics_from_fov(fov_y: float, width: int, height: int, dtype=None, device=None) -> torch.Tensor:
-    """K (3, 3) for a vertical field of view ``fov_y`` in degrees, square pixels, principal point at the centre."""
-    if not 0 < fov_y < 180:
-        raise ValueError(f"fov_y must be in (0, 180) degrees, got {fov_y}")
+    """K (3, 3) for a vertical field of view ``fov_y`` in degrees, square pixels, principal point at the centre.
+
+    width, height: the image size in pixels, positive integers. dtype: a floating torch.dtype (default:
+    torch's default dtype)."""
+    fov_y = _check_real(fov_y, "fov_y", low=0, high=180, low_open=True, high_open=True)
+    width, height = _check_count(width, "width"), _check_count(height, "height")
+    dtype = _check_dtype(dtype)
     f = 0.5 * height / math.tan(math.radians(fov_y) / 2)
     return torch.tensor([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]],
                         dtype=dtype or torch.get_default_dtype(), device=device)
+
+
+def _check_intrinsics(K: torch.Tensor, name: str = "K") -> None:
+    """K must be (3, 3), finite, with last row (0, 0, 1) (to ``K_ROW_TOLERANCE``) and non-zero fx, fy and
+    ``fx fy - K[0, 1] K[1, 0]`` (an invertible pinhole). Checked on the detached value (K may require grad)."""
+    _check_shape(K, (3, 3), name)
+    k = K.detach().double()
+    row = k[2] - torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64, device=k.device)
+    if float(row.abs().max()) > K_ROW_TOLERANCE:
+        raise ValueError(f"{name}'s last row must be (0, 0, 1), got {[round(float(v), 6) for v in k[2]]}: "
+                         f"K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] in pixels")
+    if float(k[0, 0]) == 0 or float(k[1, 1]) == 0 or float(k[0, 0] * k[1, 1] - k[0, 1] * k[1, 0]) == 0:
+        raise ValueError(f"{name} has a zero focal length (fx = K[0, 0] = {float(k[0, 0]):g}, "
+                         f"fy = K[1, 1] = {float(k[1, 1]):g}): the camera would be degenerate")
 
 
 def project_points(points_world, K, R, t, orthographic: bool = False):
@@ -148,11 +191,11 @@ def project_points(points_world, K, R, t, orthographic: bool = False):
     depth <= 0 are behind a perspective camera; their pixels are meaningless (the rasterizer clips them).
     """
     K = as_tensor(K, name="K")
-    _check_shape(K, (3, 3), "K")
+    _check_intrinsics(K)
     p_cam = world_to_camera(points_world, as_tensor(R, dtype=K.dtype, device=K.device, name="R"),
                             as_tensor(t, dtype=K.dtype, device=K.device, name="t"))   # (N, 3)
     depth = p_cam[:, 2]
-    if orthographic:
+    if _check_flag(orthographic, "orthographic"):
         xy1 = torch.cat([p_cam[:, :2], torch.ones_like(depth)[:, None]], 1)    # no division by depth
     else:
         xy1 = p_cam / depth[:, None]                                           # (X/Z, Y/Z, 1)
@@ -169,16 +212,15 @@ def pixel_rays(K, R, t, width: int, height: int, orthographic: bool = False):
     K = as_tensor(K, name="K")
     R = as_tensor(R, dtype=K.dtype, device=K.device, name="R")
     t = as_tensor(t, dtype=K.dtype, device=K.device, name="t")
-    _check_shape(K, (3, 3), "K"), _check_shape(R, (3, 3), "R"), _check_shape(t, (3,), "t")
-    if int(width) <= 0 or int(height) <= 0:
-        raise ValueError(f"image size must be positive, got width={width}, height={height}")
+    _check_intrinsics(K), _check_shape(R, (3, 3), "R"), _check_shape(t, (3,), "t")
+    width, height = _check_count(width, "width"), _check_count(height, "height")
     ys = torch.arange(height, dtype=K.dtype, device=K.device) + 0.5          # row centres
     xs = torch.arange(width, dtype=K.dtype, device=K.device) + 0.5           # column centres
     y, x = torch.meshgrid(ys, xs, indexing="ij")                             # (H, W)
     pix = torch.stack([x, y, torch.ones_like(x)], -1)                        # (H, W, 3)
     cam = pix @ torch.linalg.inv(K).T                                        # (X/Z, Y/Z, 1) or (X, Y, 1)
     eye = -R.T @ t                                                           # camera centre in world
-    if orthographic:
+    if _check_flag(orthographic, "orthographic"):
         origins_cam = torch.cat([cam[..., :2], torch.zeros_like(cam[..., :1])], -1)
         origins = origins_cam @ R + eye                                      # R.T @ (o - t) = o @ R - R.T t
         dirs = R[2].expand_as(origins)                                       # camera +z in world
@@ -194,6 +236,13 @@ class Camera:
     ``width`` × ``height`` in pixels, and ``near`` / ``far`` clipping depths (camera-space z).
 
     ``x_cam = R @ x_world + t``; gradients flow through K, R and t (make them require grad yourself).
+
+    Checked at construction (a ``ValueError`` naming the argument, never a failure later): K (3, 3) finite with
+    last row (0, 0, 1) (to 1e-4) and non-zero fx, fy; R (3, 3) finite and a rotation, ``max |R Rᵀ - I| <=
+    1e-2`` and ``det R > 0`` (checked on the detached value, so R may require grad; the tolerance admits the
+    finite-difference steps taken on R's entries, build R with ``axis_angle_to_matrix`` or ``look_at`` to stay
+    exact); t (3,) finite; width and height positive integers (not bools, not floats); ``0 < near < far``
+    (``0 <= near`` for an orthographic camera), near finite, far may be +inf.
     """
 
     def __init__(self, K, R, t, width: int, height: int, near: float = 0.1, far: float = 100.0,
@@ -201,16 +250,15 @@ class Camera:
         self.K = as_tensor(K, name="K")
         self.R = as_tensor(R, dtype=self.K.dtype, device=self.K.device, name="R")
         self.t = as_tensor(t, dtype=self.K.dtype, device=self.K.device, name="t")
-        _check_shape(self.K, (3, 3), "K"), _check_shape(self.R, (3, 3), "R"), _check_shape(self.t, (3,), "t")
-        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
-            raise ValueError(f"image size must be positive integers, got width={width}, height={height}")
-        if float(self.K[0, 0].detach()) == 0 or float(self.K[1, 1].detach()) == 0:
-            raise ValueError("K has a zero focal length (K[0, 0] or K[1, 1])")
-        if not (0 <= near < far) or (not orthographic and near <= 0):
-            raise ValueError(f"need 0 < near < far (0 <= near for orthographic), got near={near}, far={far}")
-        self.width, self.height = int(width), int(height)
-        self.near, self.far = float(near), float(far)
-        self.orthographic = bool(orthographic)
+        _check_intrinsics(self.K), _check_shape(self.R, (3, 3), "R"), _check_shape(self.t, (3,), "t")
+        _check_rotation(self.R)
+        self.width, self.height = _check_count(width, "width"), _check_count(height, "height")
+        self.orthographic = _check_flag(orthographic, "orthographic")
+        near = _check_real(near, "near", low=0, low_open=not self.orthographic)
+        far = _check_real(far, "far", allow_inf=True)
+        if not near < far:
+            raise ValueError(f"need near < far, got near={near:g}, far={far:g}")
+        self.near, self.far = near, far
 
     @classmethod
     def look_at(cls, eye, target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), *, fov_y: float | None = None,
@@ -223,14 +271,13 @@ class Camera:
         """
         if (fov_y is None) == (ortho_height is None):
             raise ValueError("give exactly one of fov_y (perspective) or ortho_height (orthographic)")
+        width, height = _check_count(width, "width"), _check_count(height, "height")
         eye = as_tensor(eye, dtype=dtype, device=device, name="eye")
         R, t = look_at(eye, target, up)
         if fov_y is not None:
             K = intrinsics_from_fov(fov_y, width, height, dtype=eye.dtype, device=eye.device)
         else:
-            if ortho_height <= 0:
-                raise ValueError(f"ortho_height must be positive, got {ortho_height}")
-            f = height / ortho_height
+            f = height / _check_real(ortho_height, "ortho_height", low=0, low_open=True)
             K = torch.tensor([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], dtype=eye.dtype, device=eye.device)
         return cls(K, R, t, width, height, near=near, far=far, orthographic=ortho_height is not None)
 
@@ -261,7 +308,7 @@ class Camera:
 
     def to(self, device=None, dtype=None) -> "Camera":
         """A copy on another device and/or dtype."""
-        conv = dict(device=device, dtype=dtype)
+        conv = dict(device=device, dtype=_check_dtype(dtype))
         return Camera(self.K.to(**conv), self.R.to(**conv), self.t.to(**conv), self.width, self.height,
                       self.near, self.far, self.orthographic)
 

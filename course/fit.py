@@ -51,6 +51,7 @@ from .camera import Camera, axis_angle_to_matrix
 from .mesh import Mesh
 from .raster import rasterize
 from .soft import nmr_rasterize, soft_rasterize
+from .tensors import _check_count, _check_real, _check_shape, as_tensor
 
 __all__ = ["FitHistory", "SilhouetteFit", "CameraFit", "circle_views", "sphere_views", "hard_silhouettes",
            "held_out_iou", "fit_silhouettes", "fit_mesh_from_silhouettes", "CAMERA_METHODS", "shaded_face_colors",
@@ -103,8 +104,9 @@ def circle_views(n: int, *, distance: float = 3.0, elevations=(25.0, -25.0), siz
                  target=(0.0, 0.0, 0.0), dtype=None, device=None) -> list:
     """``n`` cameras looking at ``target``, azimuths evenly spaced over 360°, elevations (degrees) taking turns
     from ``elevations`` (so 8 views alternate above and below). size: the square image's side in pixels."""
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
+    n = _check_count(n, "n")
+    distance = _check_real(distance, "distance", low=0, low_open=True)
+    elevations = _check_elevations(elevations)
     cams = []
     for k in range(n):
         az, el = 2 * math.pi * k / n, math.radians(elevations[k % len(elevations)])
@@ -117,8 +119,9 @@ def sphere_views(n: int = 16, *, distance: float = 3.0, size: int = 64, fov_y: f
                  offset: float = 0.3, dtype=None, device=None) -> list:
     """``n`` cameras spread evenly over the sphere (a Fibonacci spiral, offset by half a step so that no view
     coincides with a ``circle_views`` view): the held-out views."""
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
+    n = _check_count(n, "n")
+    distance = _check_real(distance, "distance", low=0, low_open=True)
+    offset = _check_real(offset, "offset")
     golden = math.pi * (3 - math.sqrt(5))
     cams = []
     for k in range(n):
@@ -128,6 +131,19 @@ def sphere_views(n: int = 16, *, distance: float = 3.0, size: int = 64, fov_y: f
         cams.append(_look((distance * r * math.sin(az), distance * y, distance * r * math.cos(az)), target, size,
                           fov_y, dtype, device))
     return cams
+
+
+def _check_elevations(elevations) -> list:
+    """A non-empty sequence of elevations in degrees, each in (-90, 90)."""
+    if isinstance(elevations, (int, float)) or not hasattr(elevations, "__len__") or len(elevations) == 0:
+        raise ValueError(f"elevations must be a non-empty sequence of angles in degrees, got {elevations!r}")
+    return [_check_real(e, "elevations", low=-90, high=90, low_open=True, high_open=True) for e in elevations]
+
+
+def _check_cameras(cameras, name: str = "cameras") -> list:
+    if not isinstance(cameras, (list, tuple)) or len(cameras) == 0 or not all(isinstance(c, Camera) for c in cameras):
+        raise ValueError(f"{name} must be a non-empty list of Camera")
+    return list(cameras)
 
 
 def _look(eye, target, size, fov_y, dtype, device):
@@ -141,6 +157,9 @@ def _look(eye, target, size, fov_y, dtype, device):
 
 def hard_silhouettes(mesh, cameras) -> torch.Tensor:
     """(N, H, W) 0 / 1 coverage of the hard rasterizer (back faces kept), one per camera; no gradient."""
+    cameras = _check_cameras(cameras)
+    if len({(c.height, c.width) for c in cameras}) != 1:
+        raise ValueError("all cameras must have the same image size")
     with torch.no_grad():
         return torch.stack([rasterize(mesh, c, cull_backfaces=False).mask.to(mesh.verts.dtype) for c in cameras])
 
@@ -187,13 +206,14 @@ def _progress(total, progress, desc):
 
 
 def _check_common(steps, lr, method, snapshot_every):
-    if not (isinstance(steps, int) and steps >= 0):
+    if isinstance(steps, bool) or not (isinstance(steps, int) and steps >= 0):
         raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
-    if not (isinstance(lr, (int, float)) and math.isfinite(lr) and lr > 0):
+    if isinstance(lr, bool) or not (isinstance(lr, (int, float)) and math.isfinite(lr) and lr > 0):
         raise ValueError(f"lr must be a positive finite number, got {lr!r}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-    if snapshot_every is not None and not (isinstance(snapshot_every, int) and snapshot_every >= 1):
+    if snapshot_every is not None and (isinstance(snapshot_every, bool) or
+                                       not (isinstance(snapshot_every, int) and snapshot_every >= 1)):
         raise ValueError(f"snapshot_every must be a positive integer or None, got {snapshot_every!r}")
 
 
@@ -207,7 +227,7 @@ def start_verts(start, seed) -> tuple:
     """(verts (V, 3), faces (F, 3)) of the Mesh ``start`` with a small seeded jitter (2e-3 of its radius about
     the origin, uniform per coordinate): the starting shape of every silhouette fit, so runs with one seed are
     identical and the symmetric sphere does not sit exactly on a tie."""
-    gen = torch.Generator(device="cpu").manual_seed(int(seed))
+    gen = torch.Generator(device="cpu").manual_seed(_check_count(seed, "seed", minimum=0))
     base = start.verts.detach()
     scale = float(base.norm(dim=1).max())
     jitter = (torch.rand(base.shape, generator=gen, dtype=torch.float64) - 0.5).to(dtype=base.dtype,
@@ -339,6 +359,9 @@ def fit_mesh_from_silhouettes(target_mesh, *, n_views: int = 8, seed: int = 0, s
     since the spirals' heights differ), or ``"ring"``: ``circle_views(n_views)`` (alternating ±25°)."""
     if layout not in ("sphere", "ring"):
         raise ValueError(f'layout must be "sphere" or "ring", got {layout!r}')
+    if not isinstance(target_mesh, Mesh):
+        raise ValueError(f"target_mesh must be a Mesh, got {type(target_mesh).__name__}")
+    n_views = _check_count(n_views, "n_views")
     like = dict(size=size, dtype=target_mesh.verts.dtype, device=target_mesh.verts.device)
     cams = sphere_views(n_views, offset=1.9, **like) if layout == "sphere" else circle_views(n_views, **like)
     return fit_silhouettes(target_mesh, cams, steps=steps, method=method, seed=seed, progress=progress, **kwargs)
@@ -348,12 +371,17 @@ def fit_mesh_from_silhouettes(target_mesh, *, n_views: int = 8, seed: int = 0, s
 
 def rotation_error(R1, R2) -> float:
     """Geodesic angle between two rotation matrices (3, 3), in degrees."""
-    c = ((torch.trace(R1.detach().double().T @ R2.detach().double()) - 1) / 2).clamp(-1, 1)
+    R1, R2 = as_tensor(R1, name="R1").detach().double(), as_tensor(R2, name="R2").detach().double()
+    _check_shape(R1, (3, 3), "R1"), _check_shape(R2, (3, 3), "R2")
+    c = ((torch.trace(R1.T @ R2.to(R1.device)) - 1) / 2).clamp(-1, 1)
     return math.degrees(float(torch.acos(c)))
 
 
 def center_error(camera, reference, target=(0.0, 0.0, 0.0)) -> float:
     """``|c - c_ref| / |c_ref - target|`` in percent: camera-centre error relative to the viewing distance."""
+    for name, cam in (("camera", camera), ("reference", reference)):
+        if not isinstance(cam, Camera):
+            raise TypeError(f"{name} must be a Camera, got {type(cam).__name__}")
     c, c_ref = camera.eye.detach().double(), reference.eye.detach().double()
     tgt = torch.as_tensor(target, dtype=torch.float64, device=c.device)
     return 100 * float((c - c_ref).norm() / (c_ref - tgt).norm())
@@ -366,10 +394,17 @@ def shaded_face_colors(mesh, light=(0.4, 0.8, 0.45), albedo=(0.85, 0.6, 0.35), a
     """(F, 3) flat Lambert colours ``albedo (ambient + (1 - ambient) max(0, n·l))`` under a directional light
     fixed in the world (``light`` points toward it): a shaded image whose colours do not depend on the camera,
     so every visibility method of lecture 09 can differentiate it."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     n = mesh.face_normals().detach()
-    d = torch.as_tensor(light, dtype=n.dtype, device=n.device)
+    d = as_tensor(light, dtype=n.dtype, device=n.device, name="light")
+    _check_shape(d, (3,), "light")
+    if float(d.norm()) == 0:
+        raise ValueError("light must be a non-zero direction (toward the light)")
     lam = (n @ (d / d.norm())).clamp(min=0)
-    a = torch.as_tensor(albedo, dtype=n.dtype, device=n.device)
+    a = as_tensor(albedo, dtype=n.dtype, device=n.device, name="albedo")
+    _check_shape(a, (3,), "albedo")
+    ambient = _check_real(ambient, "ambient", low=0, high=1)
     return a * (ambient + (1 - ambient) * lam)[:, None]
 
 
@@ -389,8 +424,11 @@ def camera_problem(mesh=None, *, size: int = 64, degrees: float = 30.0, axis=(0.
         mesh = models.teapot(4, dtype=torch.float64)
     dtype, device = mesh.verts.dtype, mesh.verts.device
     ref_cam = Camera.look_at(eye, fov_y=fov_y, width=size, height=size, dtype=dtype, device=device)
-    a = torch.as_tensor(axis, dtype=dtype, device=device)
-    Q = axis_angle_to_matrix(a / a.norm() * math.radians(degrees))
+    a = as_tensor(axis, dtype=dtype, device=device, name="axis")
+    _check_shape(a, (3,), "axis")
+    if float(a.norm()) == 0:
+        raise ValueError("axis must be a non-zero vector (the axis the start camera is orbited about)")
+    Q = axis_angle_to_matrix(a / a.norm() * math.radians(_check_real(degrees, "degrees")))
     start = Camera.look_at(Q @ ref_cam.eye, fov_y=fov_y, width=size, height=size, dtype=dtype, device=device)
     colors = shaded_face_colors(mesh) if shaded else torch.ones(mesh.faces.shape[0], 3, dtype=dtype, device=device)
     with torch.no_grad():
@@ -543,7 +581,7 @@ def fit_camera(mesh, reference_image, camera_start, *, steps: int = 150, method:
         R = R0 @ Q
         return Camera(K, R, R0 @ (tgt - Q @ tgt) + t0 + shift, W, H, camera_start.near, camera_start.far)
 
-    gen = torch.Generator(device="cpu").manual_seed(int(seed))               # edge sampling's points
+    gen = torch.Generator(device="cpu").manual_seed(_check_count(seed, "seed", minimum=0))   # edge sampling's points
 
     def loss_of(image):
         if ref.dim() == 2:

@@ -59,7 +59,7 @@ from .fit import FitHistory, _progress, _snap_due, sphere_views
 from .mesh import Mesh
 from .raster import interpolate, rasterize
 from .render import RenderSettings, Scene, render
-from .tensors import as_tensor
+from .tensors import _check_count, _check_real, as_tensor
 from .textures import sample_texture
 
 __all__ = ["TextureFit", "ColorFit", "fit_texture", "fit_vertex_colors", "fit_texture_from_images",
@@ -132,7 +132,8 @@ def smooth_vertex_colors(mesh, seed: int = 0, *, frequency: float = 2.0) -> torc
     ``frequency`` (waves per 2π world units) and a random phase φ. A function of position, so the copies of
     a seam vertex get the same colour. The course ships no vertex-coloured model; this is its stand-in."""
     _check_mesh(mesh)
-    gen = torch.Generator(device="cpu").manual_seed(int(seed))
+    gen = torch.Generator(device="cpu").manual_seed(_check_count(seed, "seed", minimum=0))
+    frequency = _check_real(frequency, "frequency", low=0)
     k = torch.randn(3, 3, generator=gen, dtype=torch.float64)
     k = frequency * k / k.norm(dim=0, keepdim=True)                          # (3 xyz, 3 channels)
     phase = 2 * math.pi * torch.rand(3, generator=gen, dtype=torch.float64)
@@ -289,7 +290,7 @@ def _start(init, shape, seed, dtype, device, name) -> torch.Tensor:
         if init == "grey":
             return torch.full(shape, 0.5, dtype=dtype, device=device)
         if init == "random":
-            gen = torch.Generator(device="cpu").manual_seed(int(seed))
+            gen = torch.Generator(device="cpu").manual_seed(_check_count(seed, "seed", minimum=0))
             return torch.rand(shape, generator=gen, dtype=torch.float64).to(dtype=dtype, device=device)
         raise ValueError(f'init must be "grey", "random" or a {name} tensor {shape}, got {init!r}')
     start = as_tensor(init, dtype=dtype, device=device, name="init").detach().clone()

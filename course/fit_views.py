@@ -75,6 +75,7 @@ from .camera import Camera, intrinsics_from_fov, look_at
 from .fit import FitHistory, _check_common, _progress, _snap_due, held_out_iou, sphere_views, start_verts
 from .mesh import Mesh
 from .soft import soft_rasterize
+from .tensors import _check_count, _check_dtype, _check_finite, _check_real, as_tensor
 
 __all__ = ["ViewFit", "view_camera", "ring_angles", "view_directions", "separation_penalty", "default_separation",
            "fit_with_learned_views"]
@@ -103,6 +104,10 @@ def view_directions(angles) -> torch.Tensor:
     """Unit vectors from the target to each eye. angles: (N, 2) radians, (azimuth, elevation). Returns (N, 3):
     ``(cos e sin a, sin e, cos e cos a)``, the convention of ``fit.circle_views`` (azimuth 0 looks from +z,
     azimuth 90° from +x, elevation 90° from +y above)."""
+    angles = as_tensor(angles, name="angles")
+    if angles.dim() != 2 or angles.shape[1] != 2:
+        raise ValueError(f"angles must have shape (N, 2), (azimuth, elevation) in radians, got {tuple(angles.shape)}")
+    _check_finite(angles, "angles")
     az, el = angles[:, 0], angles[:, 1]
     return torch.stack([torch.cos(el) * torch.sin(az), torch.sin(el), torch.cos(el) * torch.cos(az)], -1)
 
@@ -116,7 +121,11 @@ def view_camera(azimuth, elevation, *, distance: float = 3.0, size: int = 64, fo
     has a gradient with respect to the view. Same cameras as ``fit.circle_views`` at the same angles.
     Undefined straight above or below (|elevation| = 90°): keep elevations inside (-90°, 90°).
     """
-    az = torch.as_tensor(azimuth)
+    az = azimuth if isinstance(azimuth, torch.Tensor) else as_tensor(azimuth, name="azimuth")
+    if az.numel() != 1 or az.is_complex() or az.dtype == torch.bool:
+        raise ValueError(f"azimuth must be one angle (a float or 0-d tensor), got shape {tuple(az.shape)}")
+    if not isinstance(elevation, torch.Tensor):
+        _check_real(elevation, "elevation")
     dtype = az.dtype if az.is_floating_point() else torch.get_default_dtype()
     angles = torch.stack([az.to(dtype), torch.as_tensor(elevation, dtype=dtype, device=az.device)])[None]
     center = torch.as_tensor(target, dtype=dtype, device=az.device)
@@ -129,6 +138,9 @@ def view_camera(azimuth, elevation, *, distance: float = 3.0, size: int = 64, fo
 def ring_angles(n: int, *, elevations=(25.0, -25.0), dtype=torch.float64, device=None) -> torch.Tensor:
     """(n, 2) radians: the (azimuth, elevation) of ``fit.circle_views(n)``, azimuths 360°/n apart, elevations
     taking turns from ``elevations`` (degrees). The start (and, unlearned, the whole run) of the views."""
+    from .fit import _check_elevations
+    n, dtype = _check_count(n, "n"), _check_dtype(dtype)
+    elevations = _check_elevations(elevations)
     k = torch.arange(n, dtype=dtype, device=device)
     el = torch.tensor([math.radians(elevations[i % len(elevations)]) for i in range(n)], dtype=dtype, device=device)
     return torch.stack([2 * math.pi * k / n, el], -1)
@@ -141,6 +153,7 @@ def separation_penalty(angles, min_separation_deg: float) -> torch.Tensor:
     chord between two unit vectors that far apart (chords, not angles: ``acos`` has an infinite slope at
     0°, the chord's gradient stays finite). A hinge, so views farther apart feel no force at all.
     """
+    min_separation_deg = _check_real(min_separation_deg, "min_separation_deg", low=0, high=180)
     u = view_directions(angles)                                            # (N, 3)
     i, j = torch.triu_indices(len(u), len(u), 1, device=u.device)           # every pair once
     chord = (u[i] - u[j]).pow(2).sum(-1).clamp(min=1e-12).sqrt()           # (pairs,) finite gradient at 0
@@ -152,6 +165,7 @@ def default_separation(n: int) -> float:
     """0.8 · √(4π / n) in degrees (at most 180): each of n views owns 4π / n of the sphere, a cap about
     √(4π / n) radians across, and may come 20% closer than that to another (57° for 8 views, which the
     ring of ``circle_views(8)``, 66° apart at the closest, already satisfies)."""
+    n = _check_count(n, "n")
     return min(180.0, 0.8 * math.degrees(math.sqrt(4 * math.pi / n)))
 
 
@@ -164,11 +178,11 @@ def _degrees(angles) -> tuple[list, list]:
 
 def _check_views(n_views, size, view_lr, view_every, separation, min_separation_deg, max_elevation_deg,
                  distance, smoothness, sigma, radius, held_out):
-    if not (isinstance(n_views, int) and n_views >= 1):
+    if isinstance(n_views, bool) or not (isinstance(n_views, int) and n_views >= 1):
         raise ValueError(f"n_views must be a positive integer, got {n_views!r}")
-    if not (isinstance(size, int) and size >= 4):
+    if isinstance(size, bool) or not (isinstance(size, int) and size >= 4):
         raise ValueError(f"size must be an integer >= 4 (pixels), got {size!r}")
-    if not (isinstance(view_every, int) and view_every >= 1):
+    if isinstance(view_every, bool) or not (isinstance(view_every, int) and view_every >= 1):
         raise ValueError(f"view_every must be a positive integer, got {view_every!r}")
     for name, v in (("view_lr", view_lr), ("distance", distance), ("sigma", sigma), ("radius", radius)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

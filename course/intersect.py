@@ -20,7 +20,7 @@ import math
 
 import torch
 
-from .tensors import as_tensor
+from .tensors import _check_finite, as_tensor
 
 __all__ = ["intersect_triangles", "moller_trumbore", "ray_box"]
 
@@ -40,6 +40,8 @@ def _rays_and_tris(origins, directions, tris):
                          f"{tuple(d.shape)}")
     if tris.shape != (o.shape[0], 3, 3):
         raise ValueError(f"tris must have shape (N, 3, 3) with N = {o.shape[0]}, got {tuple(tris.shape)}")
+    for x, name in ((o, "origins"), (d, "directions"), (tris, "tris")):
+        _check_finite(x, name)
     return o, d, tris
 
 
@@ -139,6 +141,10 @@ def ray_box(origins, directions, lo, hi):
     if not (o.shape == d.shape == lo.shape == hi.shape) or o.dim() != 2 or o.shape[1] != 3:
         raise ValueError(f"origins, directions, lo and hi must all have shape (N, 3), got {tuple(o.shape)}, "
                          f"{tuple(d.shape)}, {tuple(lo.shape)} and {tuple(hi.shape)}")
+    _check_finite(o, "origins"), _check_finite(d, "directions")
+    _check_finite(lo, "lo", allow_inf=True), _check_finite(hi, "hi", allow_inf=True)
+    if bool((lo > hi).any()):
+        raise ValueError("lo must not exceed hi: box k is [lo_k, hi_k], its min and max corners")
     a, b = (lo - o) / d, (hi - o) / d                                       # ±inf or NaN where d = 0
     near, far = torch.minimum(a, b), torch.maximum(a, b)
     parallel, between = d == 0, (o >= lo) & (o <= hi)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 
 from .mesh import Mesh, _safe_normalize
-from .tensors import as_tensor
+from .tensors import _as_faces, _check_real, as_tensor
 
 __all__ = ["silhouette_iou_loss", "iou", "interior_edges", "smoothness_loss", "laplacian_loss",
            "edge_length_loss", "l1_loss", "l2_loss", "psnr"]
@@ -72,6 +72,7 @@ def iou(pred, target, threshold: float = 0.5) -> torch.Tensor:
     Returns a scalar for (H, W) inputs and (N,) per-view values for (N, H, W); 1.0 where both masks are
     empty (nothing to miss). A metric, not a loss: thresholding has no useful gradient.
     """
+    threshold = _check_real(threshold, "threshold", low=0, high=1)
     pred, target = _silhouettes(pred, target)
     inside_pred, inside_target = pred > threshold, target > threshold
     intersection = (inside_pred & inside_target).sum(dim=(-2, -1)).to(pred.dtype)  # (N,) or ()
@@ -84,8 +85,9 @@ def _silhouettes(pred, target):
     pred = as_tensor(pred, name="pred")
     target = as_tensor(target, dtype=pred.dtype, device=pred.device, name="target")
     for x, name in ((pred, "pred"), (target, "target")):
-        if x.ndim not in (2, 3):
-            raise ValueError(f"{name} must be an (H, W) silhouette or (N, H, W) views, got shape {tuple(x.shape)}")
+        if x.ndim not in (2, 3) or x.numel() == 0:
+            raise ValueError(f"{name} must be an (H, W) silhouette or (N, H, W) views, not empty, got shape "
+                             f"{tuple(x.shape)}")
         _check_finite(x, name)
         if x.numel() and (x.min() < 0 or x.max() > 1):
             raise ValueError(f"{name} must hold coverage in [0, 1], got values in "
@@ -199,7 +201,7 @@ def edge_length_loss(verts, faces=None, target_length=None) -> torch.Tensor:
     ends = _unique_edges(mesh.faces)                                          # (E, 2)
     d = mesh.verts[ends[:, 1]] - mesh.verts[ends[:, 0]]                       # (E, 3)
     length = d.pow(2).sum(-1).clamp(min=torch.finfo(d.dtype).tiny).sqrt()     # (E,) sqrt'(0) would be inf
-    target = length.mean() if target_length is None else target_length
+    target = length.mean() if target_length is None else _check_real(target_length, "target_length", low=0)
     return (length - target).pow(2).mean()
 
 
@@ -225,11 +227,11 @@ def _as_mesh(verts, faces) -> Mesh:
 
 
 def _check_faces(faces) -> torch.Tensor:
-    faces = torch.as_tensor(faces)
-    if faces.ndim != 2 or faces.shape[-1] != 3 or faces.is_floating_point():
-        raise ValueError(f"faces must be (F, 3) integer vertex indices, got shape {tuple(faces.shape)} "
-                         f"and dtype {faces.dtype}")
-    return faces.long()
+    """(F, 3) int64: integer indices only (a float index is refused, never rounded), none negative."""
+    try:
+        return _as_faces(faces, "faces")
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"faces must be (F, 3) integer vertex indices: {err}") from None
 
 
 # ---- images ----------------------------------------------------------------------------------
@@ -263,11 +265,16 @@ def psnr(pred, target, mask=None) -> torch.Tensor:
         raise ValueError(f"pred must be an (H, W, C) image or (N, H, W, C) images, got shape {tuple(pred.shape)}")
     squared = (pred - target).pow(2)                                          # (N, H, W, C) or (H, W, C)
     if mask is not None:
-        mask = torch.as_tensor(mask, device=pred.device)
+        try:
+            mask = torch.as_tensor(mask, device=pred.device)
+        except (TypeError, ValueError, RuntimeError):
+            raise TypeError(f"mask must be a bool or 0 / 1 array, got {type(mask).__name__}") from None
         if mask.shape != pred.shape[:-1]:
             raise ValueError(f"mask must have the image's shape without channels, {tuple(pred.shape[:-1])}, "
                              f"got {tuple(mask.shape)}")
         _check_finite(mask, "mask")
+        if mask.dtype != torch.bool and not bool(((mask == 0) | (mask == 1)).all()):
+            raise ValueError("mask must hold 0 / 1 (or bools): the pixels to compare, not weights")
         if not (mask != 0).any():
             raise ValueError("mask selects no pixel: PSNR over nothing is undefined")
         squared = squared[mask != 0]                                          # (P, C) the selected pixels
@@ -287,5 +294,7 @@ def _images(pred, target):
 
 
 def _check_finite(x: torch.Tensor, name: str) -> None:
+    if x.is_complex():
+        raise TypeError(f"{name} must hold real numbers, got dtype {x.dtype}")
     if not torch.isfinite(x.detach()).all():
         raise ValueError(f"{name} contains NaN or inf")

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .tensors import _check_device, _check_dtype
+
 __all__ = ["Mesh", "join_meshes", "load_mesh"]
 
 _FLOAT_DTYPES = (torch.float32, torch.float64)
@@ -112,7 +114,9 @@ class Mesh:
     def to(self, device=None, dtype=None) -> "Mesh":
         """A copy on ``device`` with float attributes in ``dtype`` (faces stay int64); None keeps each."""
         if dtype is not None and dtype not in _FLOAT_DTYPES:
-            raise TypeError(f"a mesh holds float32 or float64 values, got dtype={dtype}")
+            raise TypeError(f"dtype must be torch.float32 or torch.float64 (a mesh holds float32 or float64 "
+                            f"values), got dtype={dtype!r}")
+        device = _check_device(device)
         moved = {name: _move(getattr(self, name), device, dtype)
                  for name in ("verts", "vert_colors", "vert_normals", "uvs", "texture")}
         moved["faces"] = _move(self.faces, device, None)
@@ -125,12 +129,19 @@ class Mesh:
         A mirroring M (negative determinant) would turn counter-clockwise faces clockwise, so the
         face winding is flipped too: a closed mesh stays outward-facing. Gradients flow to M and verts.
         """
-        M = _to_tensor(M, "M").to(device=self.device, dtype=self.dtype)
+        M = _to_tensor(M, "M")
+        _check_numeric(M, "M")
+        M = M.to(device=self.device, dtype=self.dtype)
         if M.shape != (4, 4):
             raise ValueError(f"M must be a (4, 4) matrix, got shape {tuple(M.shape)}")
+        if not bool(torch.isfinite(M.detach()).all()):
+            raise ValueError("M contains NaN or inf")
         linear = M[:3, :3]
         verts_moved = self.verts @ linear.T + M[:3, 3]  # (V, 3) linear part and translation
         w = self.verts @ M[3, :3] + M[3, 3]  # (V,) homogeneous coordinate, 1 for affine M
+        if bool((w.detach() == 0).any()):
+            raise ValueError(f"M sends vertex {int((w.detach() == 0).nonzero()[0, 0])} to infinity "
+                             "(homogeneous w = 0)")
         det = torch.linalg.det(linear.detach()).item()
         normals = self.vert_normals
         if normals is not None:
@@ -151,6 +162,8 @@ def join_meshes(meshes) -> Mesh:
     clamped half a texel inside it, which reproduces clamp-to-edge lookups at the tile's border
     (an atlas cannot repeat a texture, so uvs outside [0, 1] are clamped too).
     """
+    if isinstance(meshes, Mesh) or not hasattr(meshes, "__iter__"):
+        raise TypeError(f"meshes must be a sequence of Mesh objects, got {type(meshes).__name__}")
     meshes = list(meshes)
     if not meshes:
         raise ValueError("join_meshes needs at least one mesh")
@@ -213,6 +226,9 @@ def load_mesh(path, *, dtype=None, device=None, srgb_textures: bool = True) -> M
     """
     import trimesh  # imported here: it is slow to import and only loading needs it
 
+    if not isinstance(path, (str, Path)):
+        raise TypeError(f"path must be a str or pathlib.Path, got {type(path).__name__}")
+    dtype, device = _check_dtype(dtype), _check_device(device)
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such mesh file: {path}")

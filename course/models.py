@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from .mesh import Mesh
+from .tensors import _check_count, _check_device, _check_dtype, _check_real
 
 __all__ = ["cube", "icosphere", "plane", "torus", "checker_texture", "teapot", "default_scene_mesh"]
 
@@ -25,7 +26,8 @@ _DATA = Path(__file__).parent / "data"
 
 def _to_mesh(verts, faces, dtype, device, uvs=None, texture=None) -> Mesh:
     """A Mesh from numpy arrays (the texture may already be a tensor), in ``dtype`` on ``device``."""
-    dtype = dtype or torch.get_default_dtype()
+    dtype = _check_dtype(dtype) or torch.get_default_dtype()
+    device = _check_device(device)
 
     def as_float(x):
         return None if x is None else torch.as_tensor(x, dtype=dtype, device=device)
@@ -63,6 +65,7 @@ def cube(size: float = 2.0, *, dtype=None, device=None) -> Mesh:
     rasterization tests rely on. The price: `Mesh.vertex_normals` rounds the corners; use
     `Mesh.face_normals` for flat-shaded sides. No uvs (a shared corner has no single uv).
     """
+    size = _check_real(size, "size", low=0, low_open=True)
     verts = np.array(list(itertools.product((-1.0, 1.0), repeat=3))) * (size / 2)  # index = 4x + 2y + z bits
     quads = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]]  # -x +x -y +y -z +z
     faces = np.array([[q[0], q[1], q[2]] for q in quads] + [[q[0], q[2], q[3]] for q in quads])
@@ -104,8 +107,8 @@ def icosphere(subdivisions: int = 3, radius: float = 1.0, *, dtype=None, device=
 
     Closed and outward-facing; subdivisions 3, 5, 7 give 1280, 20480 and 327680 faces. No uvs.
     """
-    if subdivisions < 0:
-        raise ValueError(f"subdivisions must be >= 0, got {subdivisions}")
+    subdivisions = _check_count(subdivisions, "subdivisions", minimum=0)
+    radius = _check_real(radius, "radius", low=0, low_open=True)
     verts, faces = _icosahedron()
     for _ in range(subdivisions):
         verts, faces = _subdivide_sphere(verts, faces)
@@ -118,9 +121,8 @@ def plane(size: float = 2.0, subdivisions: int = 1, *, dtype=None, device=None) 
     uvs: u runs along +x and v along -z, so seen from above (+x right) the texture is not mirrored
     and its top row lies toward -z.
     """
-    if subdivisions < 1:
-        raise ValueError(f"subdivisions must be >= 1, got {subdivisions}")
-    n = subdivisions
+    n = _check_count(subdivisions, "subdivisions")
+    size = _check_real(size, "size", low=0, low_open=True)
     v, u = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")  # rows: v, cols: u
     verts = np.stack([(u - 0.5) * size, np.zeros_like(u), (0.5 - v) * size], -1).reshape(-1, 3)
     uvs = np.stack([u, v], -1).reshape(-1, 2)
@@ -134,8 +136,12 @@ def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: i
     u goes once around the y axis (counter-clockwise seen from above), v once around the tube.
     The u = 1 and v = 1 seam vertices copy the u = 0 / v = 0 positions exactly (closed, crack-free).
     """
-    if n_major < 3 or n_minor < 3:
-        raise ValueError(f"n_major and n_minor must be >= 3, got {n_major} and {n_minor}")
+    n_major, n_minor = _check_count(n_major, "n_major", minimum=3), _check_count(n_minor, "n_minor", minimum=3)
+    minor = _check_real(minor, "minor", low=0, low_open=True)
+    major = _check_real(major, "major", low=0, low_open=True)
+    if not major > minor:
+        raise ValueError(f"major must be larger than minor (a ring torus, with a hole), got major={major:g}, "
+                         f"minor={minor:g}")
     rows, cols = np.meshgrid(np.arange(n_minor + 1), np.arange(n_major + 1), indexing="ij")
     theta = 2 * np.pi * (cols % n_major) / n_major  # angle around the y axis; modulo: seam copies are exact
     phi = 2 * np.pi * (rows % n_minor) / n_minor  # angle around the tube
@@ -152,8 +158,8 @@ def checker_texture(size: int = 256, checks: int = 8, *, dtype=None, device=None
     a white square sits in the check at uv (0, 0), the bottom-left corner of the image (row size-1,
     column 0). Texel (row r, col c) has its centre at u = (c + 0.5) / size, v = 1 - (r + 0.5) / size.
     """
-    if size < 1 or checks < 1:
-        raise ValueError(f"size and checks must be >= 1, got {size} and {checks}")
+    size, checks = _check_count(size, "size"), _check_count(checks, "checks")
+    dtype, device = _check_dtype(dtype), _check_device(device)
     centres = (np.arange(size) + 0.5) / size
     v, u = np.meshgrid(1 - centres, centres, indexing="ij")  # (size, size) each; row 0 is the top, v = 1
     cu, cv = np.floor(u * checks), np.floor(v * checks)
@@ -214,9 +220,7 @@ def teapot(resolution: int = 8, *, dtype=None, device=None) -> Mesh:
     Like the original, the surface is not closed: the lid floats in the rim's opening, and the
     spout and handle pass into the body.
     """
-    if resolution < 1:
-        raise ValueError(f"resolution must be >= 1, got {resolution}")
-    n = resolution
+    n = _check_count(resolution, "resolution")
     control = _teapot_control_points() @ np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]).T  # z up -> y up
     weights = _bernstein(np.linspace(0, 1, n + 1))  # (n+1, 4)
     grid = np.einsum("ir,jc,prcx->pijx", weights, weights, control)  # (32, n+1, n+1, 3): rows t, cols s

@@ -18,8 +18,11 @@ lecture's building blocks.
   ``rasterize_naive`` runs the per-pixel edge test over whole bounding boxes; the two agree except for
   centres within rounding error (about 1e-12 pixel) of an edge, and the tests hold them to each other.
 * **Visibility** is one bulk z-buffer: every covered pixel writes a packed 64-bit key
-  ``(float32 depth bits << 32) | face id`` and a single scatter-min keeps the nearest; ties go to the lower
-  face id, deterministically.
+  ``(float32 depth bits << 32) | face id`` and a single scatter-min keeps the nearest. float32 keys alone would
+  confuse surfaces closer than a few float32 steps (relative depth ~1e-7), so pixels where two keys come
+  within 4 float32 steps are decided again by float64 depth (``scan._NearTies``): the visible face is the
+  nearest in float64, as ``raycast`` and ``coverage.exact_coverage`` find it. Depths equal to float64
+  rounding (1e-12 relative: coplanar faces) are a tie and go to the lower face id, deterministically.
 * **Perspective-correct barycentrics and depth** are computed last, only for the visible face of each pixel,
   by intersecting the pixel's ray with that face in camera space (Cramer's rule on the face's edges, written
   so that float32 stays accurate on sub-pixel triangles and far from the origin). This stage is written in plain
@@ -35,9 +38,9 @@ from dataclasses import dataclass
 import torch
 
 from .camera import Camera, world_to_camera
-from .scan import (EMPTY_KEY, _ScreenTriangles, _depth_keys, _faces_of, _is_top_left, _max3, _min3,
+from .scan import (EMPTY_KEY, _ScreenTriangles, _depth_keys, _faces_of, _is_top_left, _max3, _min3, _nearest,
                    _sample_zbuffer, _zbuffer, edge_function, pixel_triangle_pairs)
-from .tensors import as_tensor
+from .tensors import _as_faces, _as_index, _check_count, _check_finite, _check_flag, _check_real, as_tensor
 
 __all__ = [
     "Fragments", "rasterize", "rasterize_naive", "interpolate", "edge_function", "inside_triangle",
@@ -87,6 +90,7 @@ def inside_triangle(tri, points) -> torch.Tensor:
     points = as_tensor(points, dtype=tri.dtype, device=tri.device, name="points")
     if tri.shape != (3, 2) or points.dim() != 2 or points.shape[1] != 2:
         raise ValueError(f"expected tri (3, 2) and points (N, 2), got {tuple(tri.shape)} and {tuple(points.shape)}")
+    _check_finite(tri, "tri"), _check_finite(points, "points")
     tri, area, _ = _oriented(tri)
     inside = torch.ones(points.shape[0], dtype=torch.bool, device=points.device) & (area > 0)
     for k in range(3):
@@ -106,6 +110,7 @@ def barycentric_2d(tri, points) -> torch.Tensor:
     points = as_tensor(points, dtype=tri.dtype, device=tri.device, name="points")
     if tri.shape != (3, 2) or points.dim() != 2 or points.shape[1] != 2:
         raise ValueError(f"expected tri (3, 2) and points (N, 2), got {tuple(tri.shape)} and {tuple(points.shape)}")
+    _check_finite(tri, "tri"), _check_finite(points, "points")
     v0, v1, v2 = tri
     area = edge_function(v0, v1, v2)
     w = torch.stack([edge_function(v1, v2, points), edge_function(v2, v0, points),
@@ -124,6 +129,14 @@ def perspective_correct_bary(bary_screen, z) -> torch.Tensor:
     """
     b = as_tensor(bary_screen, name="bary_screen")
     z = as_tensor(z, dtype=b.dtype, device=b.device, name="z")
+    if b.dim() != 2 or b.shape[1] != 3:
+        raise ValueError(f"bary_screen must have shape (N, 3), got {tuple(b.shape)}")
+    if z.shape != (3,) and z.shape != b.shape:
+        raise ValueError(f"z must have shape (N, 3) like bary_screen, or (3,), got {tuple(z.shape)}")
+    _check_finite(b, "bary_screen"), _check_finite(z, "z")
+    if bool((z == 0).any()):
+        raise ValueError("z holds a zero depth: a vertex in the camera's plane (z = 0) has no perspective "
+                         "projection; clip the triangle at the near plane first")
     w = b / z
     s = w.sum(-1, keepdim=True)
     return w / torch.where(s == 0, torch.ones_like(s), s)
@@ -134,11 +147,14 @@ def zbuffer_resolve(pixel_index, depth, face_id, num_pixels: int):
 
     pixel_index: (M,) int64 flat pixel of each fragment; depth: (M,); face_id: (M,) int64 in [0, 2³¹).
     Returns ``face_map`` (P,) int64 (-1 where no fragment) and ``depth_map`` (P,) (+inf where none), with
-    P = num_pixels. Ties go to the lower face id. Depths are compared as float32; non-finite ones are ignored.
+    P = num_pixels. Ties go to the lower face id. Depths are compared as float32 (the packed key of the
+    lecture); non-finite ones are ignored. (``rasterize`` packs the same keys, then re-decides near-ties, keys
+    within 4 float32 steps, in float64.)
     """
+    num_pixels = _check_count(num_pixels, "num_pixels", minimum=0)
     depth = as_tensor(depth, name="depth")
-    pixel_index = torch.as_tensor(pixel_index, device=depth.device).long()
-    face_id = torch.as_tensor(face_id, device=depth.device).long()
+    pixel_index = _as_index(pixel_index, "pixel_index", device=depth.device)
+    face_id = _as_index(face_id, "face_id", device=depth.device)
     if not (pixel_index.shape == depth.shape == face_id.shape) or depth.dim() != 1:
         raise ValueError("pixel_index, depth and face_id must be 1-D and the same length, got shapes "
                          f"{tuple(pixel_index.shape)}, {tuple(depth.shape)}, {tuple(face_id.shape)}")
@@ -172,6 +188,8 @@ def clip_polygon_near(tri_cam, near: float) -> torch.Tensor:
     tri = as_tensor(tri_cam, name="tri_cam")
     if tri.shape != (3, 3):
         raise ValueError(f"expected one camera-space triangle tri_cam (3, 3), got {tuple(tri.shape)}")
+    _check_finite(tri, "tri_cam")
+    near = _check_real(near, "near", low=0, low_open=True)
     keep = (tri[:, 2] >= near).tolist()                                     # in front of (or on) the plane
     corner = lambda k: torch.tensor([k], device=tri.device)                 # noqa: E731
     polygon = []
@@ -199,19 +217,22 @@ def _check_inputs(mesh, camera):
     verts, faces = getattr(mesh, "verts", None), getattr(mesh, "faces", None)
     if verts is None or faces is None:
         raise TypeError(f"mesh must have verts (V, 3) and faces (F, 3), got {type(mesh).__name__}")
-    if not isinstance(verts, torch.Tensor) or verts.dim() != 2 or verts.shape[1] != 3:
-        raise ValueError(f"mesh.verts must be a (V, 3) tensor, got {getattr(verts, 'shape', type(verts))}")
-    if not isinstance(faces, torch.Tensor) or faces.dim() != 2 or faces.shape[1] != 3:
-        raise ValueError(f"mesh.faces must be an (F, 3) tensor, got {getattr(faces, 'shape', type(faces))}")
-    if faces.numel() and int(faces.max()) >= verts.shape[0]:
-        raise ValueError(f"faces index vertex {int(faces.max())} but the mesh has {verts.shape[0]} vertices")
-    if faces.numel() and int(faces.min()) < 0:
-        raise ValueError(f"faces hold a negative vertex index ({int(faces.min())})")
+    if not isinstance(verts, torch.Tensor):
+        raise ValueError(f"mesh.verts must be a (V, 3) torch tensor, got {type(verts).__name__} (a "
+                         "course.mesh.Mesh converts arrays for you)")
+    if verts.dim() != 2 or verts.shape[1] != 3:
+        raise ValueError(f"mesh.verts must have shape (V, 3), got {tuple(verts.shape)}")
+    if verts.dtype == torch.bool or verts.is_complex():
+        raise TypeError(f"mesh.verts must hold real numbers, got dtype {verts.dtype}")
+    if not isinstance(faces, torch.Tensor):
+        raise ValueError(f"mesh.faces must be an (F, 3) torch tensor, got {type(faces).__name__} (a "
+                         "course.mesh.Mesh converts arrays for you)")
+    faces = _as_faces(faces, "mesh.faces", num_verts=verts.shape[0])       # integers only: never rounded
     if faces.shape[0] >= 2**31:
         raise ValueError("at most 2**31 - 1 faces are supported")
-    if not torch.isfinite(verts).all():
+    if not torch.isfinite(verts.detach()).all():
         raise ValueError("mesh.verts contains NaN or inf")
-    return verts, faces.long()
+    return verts, faces
 
 
 def _camera_space(verts, camera):
@@ -418,8 +439,15 @@ def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False, samples=Non
     mesh: anything with ``verts`` (V, 3) world space and ``faces`` (F, 3) int64 (a ``course.mesh.Mesh``).
     camera: a ``Camera`` (perspective or orthographic; near and far planes clip).
     cull_backfaces: skip faces whose vertices appear clockwise to the viewer (front faces are CCW).
-    Returns ``Fragments`` of shape (H, W). Coverage follows the top-left fill rule; ties in depth go to the
-    lower face id. ``bary`` and ``depth`` are differentiable w.r.t. ``mesh.verts`` and the camera's K, R, t;
+    Returns ``Fragments`` of shape (H, W). Coverage follows the top-left fill rule. Visibility: the face
+    nearest in float64 at the pixel centre (or sample). The z-buffer's keys hold float32 depths; where two of
+    a pixel's keys are within 4 float32 steps (relative depth ~5e-7) the float64 depths (each face's 1/z,
+    affine on screen, at the point) decide instead, so two surfaces 3.3e-8 apart in relative depth resolve as
+    ``raycast`` and ``coverage.exact_coverage`` resolve them. Depths within 1e-12 of each other (relative:
+    float64 rounding, coplanar faces) are a tie, which goes to the lower face id; ``raycast`` compares its
+    float64 t exactly there and ``exact_coverage`` counts faces within ~2e-9 as coplanar, so below those
+    separations the three may differ (``scan.TIE_RTOL``).
+    ``bary`` and ``depth`` are differentiable w.r.t. ``mesh.verts`` and the camera's K, R, t;
     the choice of visible face is not (lecture 08: why visibility is not differentiable).
 
     Sub-pixel samples (lecture 05, supersampling): ``samples`` (S, 2) offsets from each pixel's top-left
@@ -433,6 +461,7 @@ def rasterize(mesh, camera: Camera, *, cull_backfaces: bool = False, samples=Non
     edge.)
     """
     verts, faces = _check_inputs(mesh, camera)
+    cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     H, W = camera.height, camera.width
     if samples is not None or pixels is not None:
         pixels, offsets = _check_samples(samples, pixels, H, W, verts.device)
@@ -501,9 +530,12 @@ def rasterize_naive(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fr
     """The same result the slow, obvious way: for each triangle test every pixel of its bounding box.
 
     A Python loop over triangles calling ``inside_triangle`` — the lecture's first rasterizer and the
-    reference the fast path is tested against. Use small images.
+    reference the fast path is tested against. Visibility compares the fragments' float64 depths (within
+    1e-12 relative a tie, to the lower face id), which is what ``rasterize``'s refined z-buffer computes.
+    Use small images.
     """
     verts, faces = _check_inputs(mesh, camera)
+    cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     H, W = camera.height, camera.width
     with torch.no_grad():
         st = _screen_triangles(_camera_space(verts, camera), faces, camera, cull_backfaces)
@@ -522,8 +554,8 @@ def rasterize_naive(mesh, camera: Camera, *, cull_backfaces: bool = False) -> Fr
             keep = depth <= camera.far
             pixels.append((rows.flatten() * W + cols.flatten())[hit][keep])
             depths.append(depth[keep]), ids.append(face.expand(int(keep.sum())))
-        if pixels:
-            face_map, _ = zbuffer_resolve(torch.cat(pixels), torch.cat(depths), torch.cat(ids), H * W)
+        if pixels:                                                          # float64 depths: as rasterize decides
+            face_map = _nearest(torch.cat(pixels), torch.cat(depths), torch.cat(ids), H * W)
         else:
             face_map = torch.full((H * W,), -1, dtype=torch.int64)
     bary, depth = _visible_surface(face_map.to(verts.device), verts, faces, camera, H, W)
@@ -538,13 +570,15 @@ def interpolate(attr, fragments: Fragments, faces) -> torch.Tensor:
     barycentrics, the vertex positions.
     """
     attr = as_tensor(attr, name="attr")
-    faces = torch.as_tensor(faces, device=attr.device).long()
     if attr.dim() != 2:
         raise ValueError(f"attr must have shape (V, C), got {tuple(attr.shape)}")
-    if faces.dim() != 2 or faces.shape[1] != 3:
-        raise ValueError(f"faces must have shape (F, 3), got {tuple(faces.shape)}")
-    if faces.numel() and int(faces.max()) >= attr.shape[0]:
-        raise ValueError(f"faces index vertex {int(faces.max())} but attr has {attr.shape[0]} rows")
+    _check_finite(attr, "attr")
+    faces = _as_faces(faces, "faces", num_verts=attr.shape[0], device=attr.device, holder="attr has {} rows")
+    if not (hasattr(fragments, "face_id") and hasattr(fragments, "bary")):
+        raise TypeError(f"fragments must be Fragments (from rasterize or raycast), got {type(fragments).__name__}")
+    if fragments.face_id.dim() != 2 or fragments.bary.shape != (*fragments.face_id.shape, 3):
+        raise ValueError(f"fragments must have face_id (H, W) and bary (H, W, 3), got "
+                         f"{tuple(fragments.face_id.shape)} and {tuple(fragments.bary.shape)}")
     H, W = fragments.face_id.shape
     face_id = fragments.face_id.reshape(-1)
     if face_id.numel() and int(face_id.max()) >= faces.shape[0]:

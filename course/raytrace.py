@@ -24,7 +24,7 @@ import torch
 from .bvh import BVH, Hits, morton_codes
 from .intersect import _slab, _watertight, intersect_triangles, moller_trumbore, ray_box  # noqa: F401 (re-exported)
 from .raster import Fragments, _check_inputs, _surface_at
-from .tensors import as_tensor
+from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = ["intersect_triangles", "moller_trumbore", "ray_box", "morton_codes", "BVH", "Hits", "raycast", "visible",
            "rectangle_light_samples", "disk_light_samples"]
@@ -69,8 +69,14 @@ def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     (j + 0.5, i + 0.5), traced in float64 (as ``rasterize`` decides coverage in float64), between the near
     and far planes: a ray whose direction has camera-space z component d_z runs over t in
     [near / d_z, far / d_z], so exactly the points with depth in [near, far] count. The BVH picks the visible
-    face (ties to the lower face id); the barycentrics and depth come from ``raster._surface_at``, exactly as
-    in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and K, R, t. Returns Fragments (H, W).
+    face: the least t, compared exactly in float64, exact ties in t to the lower face id. That is the face
+    nearest in float64, which ``rasterize`` also returns (its float32 z-buffer keys re-decide near-ties in
+    float64), so the two agree on surfaces closer than float32 can tell apart (3.3e-8 in relative depth, and
+    down to about 1e-12). Below that ``rasterize`` calls the depths a tie (lower face id), while here the
+    rounding of t decides: on coplanar overlapping faces the two (and ``coverage.exact_coverage``, whose
+    coplanarity tolerance is ~2e-9) may show different faces. The barycentrics and depth come from
+    ``raster._surface_at``, exactly as in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and
+    K, R, t. Returns Fragments (H, W).
     """
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
@@ -117,14 +123,18 @@ def visible(points, light, bvh: BVH, *, directional: bool = False, offset: float
     * with ``normals`` (N, 3), the geometric normals of the points' faces (the side they are seen from),
       each ray starts ``offset`` above the surface along its normal: a light behind the surface is then
       shadowed by it, as it should be; at grazing light the offset origin still clears the own triangle.
+      A zero normal (a degenerate face) falls back to the first way for that point.
+
+    Raises ValueError for NaN / inf points, lights or normals, a zero direction with ``directional=True``
+    (a light travelling nowhere), a negative or non-numeric offset, or shapes that do not match.
     """
     if not isinstance(bvh, BVH):
         raise TypeError(f"bvh must be a BVH, got {type(bvh).__name__}")
+    directional = _check_flag(directional, "directional")
     p = as_tensor(points, name="points")
     dtype = torch.promote_types(p.dtype, bvh.dtype)
     p = p.to(dtype=dtype, device=bvh.device)
-    if p.dim() != 2 or p.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {tuple(p.shape)}")
+    _check_shape(p, (None, 3), "points")
     N = p.shape[0]
     L = as_tensor(light, dtype=dtype, device=bvh.device, name="light")
     area = L.dim() == 3
@@ -133,22 +143,25 @@ def visible(points, light, bvh: BVH, *, directional: bool = False, offset: float
     if not (L.shape == (N, 3) or (area and L.shape[0] == N and L.shape[2] == 3 and not directional)):
         raise ValueError(f"light must have shape (3,), (N, 3) or, for area-light samples, (N, S, 3) with "
                          f"N = {N}, got {tuple(L.shape)}")
-    if not torch.isfinite(L).all():
-        raise ValueError("light contains NaN or inf")
+    _check_finite(L, "light")
+    if directional and bool((L.detach().abs().amax(-1) == 0).any()):
+        raise ValueError("light must be a non-zero direction with directional=True (the way the light travels), "
+                         "got a zero vector")
     if offset is None:
         diag = float((bvh.bounds[1] - bvh.bounds[0]).norm()) if bvh.num_nodes else 0.0
         offset = 1e-4 * diag if diag > 0 else 1e-4
-    offset = float(offset)
-    if not offset >= 0:
-        raise ValueError(f"offset must be >= 0, got {offset}")
+    offset = _check_real(offset, "offset", low=0)
     S = L.shape[1] if area else 1
     L = L.reshape(N * S, 3)
     o = p.repeat_interleave(S, 0)
     if normals is not None:
         n = as_tensor(normals, dtype=dtype, device=bvh.device, name="normals")
         if n.shape != (N, 3):
-            raise ValueError(f"normals must have shape (N, 3), got {tuple(n.shape)}")
-        n = n / n.norm(dim=1, keepdim=True).clamp_min(torch.finfo(dtype).tiny)
+            raise ValueError(f"normals must have shape (N, 3) with N = {N}, got {tuple(n.shape)}")
+        _check_finite(n, "normals")
+        length = n.norm(dim=1, keepdim=True)
+        zero = (length == 0).repeat_interleave(S, 0)[:, 0]                  # no normal: t_min = offset instead
+        n = n / length.clamp_min(torch.finfo(dtype).tiny)
         o = o + offset * n.repeat_interleave(S, 0)
     if directional:
         d = -L / L.norm(dim=1, keepdim=True).clamp_min(torch.finfo(dtype).tiny)
@@ -159,7 +172,7 @@ def visible(points, light, bvh: BVH, *, directional: bool = False, offset: float
         safe = dist.clamp_min(torch.finfo(dtype).tiny)
         t_lo, t_hi = offset / safe, 1 - offset / safe
     if normals is not None:
-        t_lo = torch.zeros_like(t_lo)
+        t_lo = torch.where(zero, t_lo, torch.zeros_like(t_lo))
     blocked = bvh.intersect(o, d, t_min=t_lo, t_max=t_hi, any_hit=True).hit
     free = ~blocked
     if area:
@@ -175,8 +188,12 @@ def _generator(seed, generator, device):
 
 def _stratified(n_points, grid, dtype, device, seed, generator):
     """(N, grid², 2) jittered samples in [0, 1)²: one uniform sample in each of grid × grid cells, per point."""
-    if int(grid) < 1 or int(n_points) < 0:
-        raise ValueError(f"need grid >= 1 and n_points >= 0, got grid={grid}, n_points={n_points}")
+    n_points = _check_count(n_points, "n_points", minimum=0)
+    grid = _check_count(grid, "grid")
+    if generator is not None and not isinstance(generator, torch.Generator):
+        raise TypeError(f"generator must be a torch.Generator or None, got {type(generator).__name__}")
+    if generator is None:
+        seed = _check_count(seed, "seed", minimum=0)
     g = _generator(seed, generator, device)
     cells = torch.arange(grid, dtype=dtype, device=device)
     i, j = torch.meshgrid(cells, cells, indexing="ij")
@@ -197,8 +214,9 @@ def rectangle_light_samples(corner, edge1, edge2, n_points: int, grid: int = 4, 
     e1 = as_tensor(edge1, dtype=c.dtype, device=c.device, name="edge1")
     e2 = as_tensor(edge2, dtype=c.dtype, device=c.device, name="edge2")
     for v, name in ((c, "corner"), (e1, "edge1"), (e2, "edge2")):
-        if v.shape != (3,):
-            raise ValueError(f"{name} must have shape (3,), got {tuple(v.shape)}")
+        _check_shape(v, (3,), name)
+    if float(torch.linalg.cross(e1, e2).detach().norm()) == 0:
+        raise ValueError("edge1 and edge2 must span a rectangle: they are parallel (or one is zero)")
     uv = _stratified(n_points, grid, c.dtype, c.device, seed, generator)
     return c + uv[..., :1] * e1 + uv[..., 1:] * e2
 
@@ -212,11 +230,10 @@ def disk_light_samples(centre, normal, radius: float, n_points: int, grid: int =
     """
     c = as_tensor(centre, name="centre")
     n = as_tensor(normal, dtype=c.dtype, device=c.device, name="normal")
-    if c.shape != (3,) or n.shape != (3,) or float(n.norm()) == 0:
-        raise ValueError(f"centre and normal must have shape (3,), normal non-zero; got {tuple(c.shape)}, "
-                         f"{tuple(n.shape)}")
-    if not float(radius) > 0:
-        raise ValueError(f"radius must be > 0, got {radius}")
+    _check_shape(c, (3,), "centre"), _check_shape(n, (3,), "normal")
+    if float(n.detach().norm()) == 0:
+        raise ValueError("normal must be a non-zero vector")
+    radius = _check_real(radius, "radius", low=0, low_open=True)
     n = n / n.norm()
     helper = torch.zeros_like(n)
     helper[int(n.abs().argmin())] = 1.0                                     # an axis far from the normal

@@ -31,7 +31,6 @@ The scene helpers ``frame_camera`` and ``default_lights`` live in ``course.frami
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
@@ -45,13 +44,13 @@ from course.raster import Fragments, _is_camera, interpolate, rasterize
 from course.raytrace import BVH
 from course.raytrace import visible as ray_visible
 from course.shading import (
-    DirectionalLight, Material, PointLight, _face_material, flat_shading, gouraud_shading, light_terms,
+    AmbientLight, DirectionalLight, Material, PointLight, _face_material, flat_shading, gouraud_shading, light_terms,
     mip_pyramid, normalize, phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions,
     wireframe_overlay,
 )
 from course.shadows import shadow_factor, shadow_map
 from course.soft import nmr_image, soft_rasterize
-from course.tensors import as_tensor
+from course.tensors import _check_count, _check_flag, _check_real, as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",
            "default_lights", "SHADING_MODES"]
@@ -94,6 +93,16 @@ class Scene:
         if self.camera.width < 1 or self.camera.height < 1:
             raise ValueError(f"the camera image is empty ({self.camera.width}x{self.camera.height} pixels)")
         _check_background(self.background)
+        if self.lights is None:
+            self.lights = ()
+        one_light = isinstance(self.lights, (AmbientLight, DirectionalLight, PointLight))
+        if one_light or not hasattr(self.lights, "__iter__"):
+            raise TypeError(f"lights must be a sequence of lights, got {type(self.lights).__name__} (wrap one light "
+                            "in a list: [light])")
+        for i, light in enumerate(self.lights):
+            if not isinstance(light, (AmbientLight, DirectionalLight, PointLight)):
+                raise TypeError(f"scene light {i} is a {type(light).__name__}; use AmbientLight, DirectionalLight or "
+                                "PointLight")
         self.meshes, self.lights = meshes, tuple(self.lights)
         self.materials = _materials_per_mesh(self.materials, len(meshes))
         for m in meshes:
@@ -104,11 +113,12 @@ class Scene:
 
 def _check_background(bg) -> None:
     try:
-        ok = as_tensor(bg).numel() == 3
+        t = as_tensor(bg)
+        ok = t.numel() == 3 and bool(torch.isfinite(t.detach()).all())
     except (TypeError, ValueError, RuntimeError):
         ok = False
     if not ok:
-        raise ValueError(f"background must be 3 numbers (RGB in [0, 1]), got {bg!r}")
+        raise ValueError(f"background must be 3 numbers (RGB in [0, 1], finite), got {bg!r}")
 
 
 def _materials_per_mesh(materials, n: int) -> tuple:
@@ -175,6 +185,18 @@ class RenderSettings:
     soft_threshold: float = 1e-4
 
     def __post_init__(self):
+        for name in ("textures", "wireframe", "cull_backfaces", "clamp", "return_depth", "return_normals",
+                     "return_silhouette", "jitter"):
+            _check_flag(getattr(self, name), name)
+        _check_count(self.seed, "seed", minimum=0)
+        _check_real(self.wireframe_width, "wireframe_width", low=0, low_open=True)
+        try:
+            color = as_tensor(self.wireframe_color)
+            ok = color.shape == (3,) and bool(torch.isfinite(color).all())
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"wireframe_color must be 3 finite numbers (RGB), got {self.wireframe_color!r}")
         if self.shading not in SHADING_MODES:
             raise ValueError(f"unknown shading mode {self.shading!r}; choose one of {', '.join(SHADING_MODES)}")
         if self.texture_filter not in TEXTURE_FILTERS:
@@ -189,16 +211,17 @@ class RenderSettings:
             raise ValueError(f"samples (per axis) must be a positive int, got {self.samples!r}")
         if self.shadows not in SHADOW_MODES:
             raise ValueError(f"shadows must be one of {', '.join(map(repr, SHADOW_MODES))}, got {self.shadows!r}")
-        if not isinstance(self.shadow_resolution, int) or self.shadow_resolution < 1:
+        if isinstance(self.shadow_resolution, bool) or not isinstance(self.shadow_resolution, int) or \
+                self.shadow_resolution < 1:
             raise ValueError(f"shadow_resolution must be a positive int, got {self.shadow_resolution!r}")
-        if not isinstance(self.shadow_pcf, int) or self.shadow_pcf < 1 or self.shadow_pcf % 2 == 0:
+        if isinstance(self.shadow_pcf, bool) or not isinstance(self.shadow_pcf, int) or self.shadow_pcf < 1 or \
+                self.shadow_pcf % 2 == 0:
             raise ValueError(f"shadow_pcf must be a positive odd int, got {self.shadow_pcf!r}")
         if self.visibility not in VISIBILITY_MODES:
             raise ValueError(f"visibility must be one of {', '.join(map(repr, VISIBILITY_MODES))}, "
                              f"got {self.visibility!r}")
         for name in ("sigma", "gamma", "soft_threshold"):
-            if not 0 < getattr(self, name) < math.inf:
-                raise ValueError(f"{name} must be a positive number, got {getattr(self, name)!r}")
+            _check_real(getattr(self, name), name, low=0, low_open=True)
         if self.visibility == "nmr" and self.antialias != "none":
             raise ValueError("visibility='nmr' needs antialias='none': its gradient is that of the pixel centres")
         if self.visibility == "soft":
@@ -246,6 +269,10 @@ def _needs_grad(scene: Scene) -> bool:
 
 def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
     """The stages ``render`` will run for this scene, in order (a subset of the module docstring's chain)."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    if not isinstance(settings, RenderSettings):
+        raise TypeError(f"settings must be a RenderSettings, got {type(settings).__name__}")
     mode = settings.shading
     lit = mode in LIT_MODES and len(scene.lights) > 0                      # no lights: drawn unlit
     wanted = {
@@ -437,9 +464,11 @@ def render(scene: Scene, settings: RenderSettings | None = None, *, _force: Sequ
     Only the passes the scene needs run (``result.passes`` names them). ``_force`` (private, for tests and
     benchmarks) turns skipped passes back on — one of ``FORCEABLE`` — to show each skip changes nothing.
     """
-    settings = settings or RenderSettings()
+    settings = RenderSettings() if settings is None else settings
     if not isinstance(scene, Scene):
         raise TypeError(f"render() takes a Scene, got {type(scene).__name__}")
+    if not isinstance(settings, RenderSettings):
+        raise TypeError(f"settings must be a RenderSettings, got {type(settings).__name__}")
     unknown = set(_force) - set(FORCEABLE)
     if unknown:
         raise ValueError(f"cannot force {sorted(unknown)}; forceable passes: {', '.join(FORCEABLE)}")

@@ -12,7 +12,11 @@ Stage 2 of ``rasterize`` (lecture 03; sub-pixel samples for lecture 05), on tria
   triangle touches (conservative rasterization), and each sample of those pixels is tested with the same
   edge functions. A sample's answer depends on its position alone.
 * **The z-buffer** in bulk: every covered pixel (or sample) writes a packed 64-bit key
-  ``(float32 depth bits << 32) | face id`` and one scatter-min keeps the nearest; ties go to the lower face id.
+  ``(float32 depth bits << 32) | face id`` and one scatter-min keeps the nearest. Slots where two keys come
+  within ``TIE_STEPS`` (4) float32 steps of each other are noted on the way (``_NearTies``) and decided again
+  by float64 depth, so the result is the face nearest in float64: the answer of ``raycast`` and
+  ``coverage.exact_coverage`` for surfaces closer than float32 can tell apart. Depths equal to 1e-12
+  (relative, ``TIE_RTOL``: float64 rounding, coplanar faces) are a tie, which goes to the lower face id.
 
 Work is chunked so memory stays bounded (``CHUNK``).
 """
@@ -22,7 +26,7 @@ from dataclasses import dataclass
 
 import torch
 
-from .tensors import as_tensor
+from .tensors import _check_count, _check_finite, as_tensor
 
 __all__ = ["edge_function", "pixel_triangle_pairs"]
 
@@ -37,7 +41,15 @@ def edge_function(a, b, p) -> torch.Tensor:
     a→b as seen on screen. Written as ``(a - p) × (b - p)`` so that swapping a and b negates the result
     *exactly* in floating point: two triangles sharing an edge always disagree on its sign, never both win.
     """
-    a, b, p = torch.broadcast_tensors(*(as_tensor(v) for v in (a, b, p)))
+    a, b, p = (as_tensor(v, name=n) for v, n in ((a, "a"), (b, "b"), (p, "p")))
+    for v, n in ((a, "a"), (b, "b"), (p, "p")):
+        if v.shape[-1:] != (2,):
+            raise ValueError(f"{n} must have shape (..., 2), image coordinates (x, y), got {tuple(v.shape)}")
+    try:
+        a, b, p = torch.broadcast_tensors(a, b, p)
+    except RuntimeError:
+        raise ValueError(f"a, b and p must broadcast together, got shapes {tuple(a.shape)}, {tuple(b.shape)} "
+                         f"and {tuple(p.shape)}") from None
     return (a[..., 0] - p[..., 0]) * (b[..., 1] - p[..., 1]) - (a[..., 1] - p[..., 1]) * (b[..., 0] - p[..., 0])
 
 
@@ -73,6 +85,105 @@ def _faces_of(zbuf: torch.Tensor) -> torch.Tensor:
     """Face ids from resolved keys: the low 32 bits, and -1 where a pixel still holds ``EMPTY_KEY``
     (adding 1 carries its all-ones low bits to zero)."""
     return ((zbuf + 1) & 0xFFFFFFFF) - 1
+
+
+# ------------------------------------------------------------------- near-ties: float64 after the float32 keys
+
+# Near-ties. The packed key rounds each fragment's depth to float32 (relative steps of 2^-24 ≈ 6e-8, and the
+# depth passes through two float32 roundings, 1/q of a rounded q), so two surfaces closer than a few float32
+# steps would tie (the lower face id winning) or even swap, where ``raycast`` and ``coverage.exact_coverage``
+# compare in float64. So that they agree, the z-buffer notes every pixel where two fragments' keys come within
+# ``TIE_STEPS`` float32 steps of each other while it fills (``_NearTies``: two gathers per fragment, its
+# pixel's key before and after the scatter-min, one on the first chunk, and a few integer operations: 0-10 %
+# of ``rasterize``'s time on the ``bench raster`` scenes, ``REFINE_TIES = False`` to compare), and afterwards
+# decides those pixels among the faces noted there by float64 depth, each face's screen-affine q evaluated at
+# the pixel centre or sample (``_nearest``). Depths within ``TIE_RTOL`` (1e-12, relative) of the nearest count
+# as a tie and go to the lower face id: that is float64 rounding, not geometry, so coplanar faces (z-fighting)
+# keep the deterministic lower-id rule instead of rounding noise. Every face that could win in float64 is among those
+# noted: two float32 roundings move a key by at most 2 steps from its exact place, so a fragment nearer in
+# float64 than the float32 winner has a key at most 3 steps above the winner's, and the notes catch every
+# pair within 4 steps (a fragment is compared with the key its pixel held before its chunk, and with the
+# winner after its chunk).
+TIE_STEPS = 4
+TIE_RTOL = 1e-12
+_GAP_SHIFT = 35             # 2^35 = 8 << 32: the key gaps noted cover TIE_STEPS float32 steps and a few more
+REFINE_TIES = True          # False: the float32 keys alone (benchmarks show what the refinement costs)
+
+
+class _NearTies:
+    """Notes (slot, face) pairs whose keys came within TIE_STEPS float32 steps of each other in one slot.
+
+    zbuf: the z-buffer being filled (its entries only decrease). ``check`` after each scatter-min; ``resolve``
+    at the end with a function giving the float64 depth of (slots, faces)."""
+
+    def __init__(self, zbuf: torch.Tensor):
+        self.zbuf = zbuf
+        self.slots, self.faces = [], []
+
+    def check(self, slot, keys, before=None):
+        """slot, keys (M,): the fragments just scattered; before (M,): their slots' keys before the scatter
+        (None: the z-buffer was empty, the first chunk).
+
+        A fragment is noted with the key its slot held before when it lies at most TIE_STEPS float32 steps
+        below it (it displaced that one, or a sibling of its chunk displaced both), and with its slot's key after
+        the scatter when it lies above that by at most TIE_STEPS (it lost to a fragment of an earlier chunk or of
+        this one). Key differences ``(Δbits << 32) + Δface`` below ``8 << 32`` stand in for gaps of at most
+        TIE_STEPS steps (they admit up to 7: harmless extra notes; an empty slot's key, whose difference can wrap
+        around, is never noted), which keeps this to a few integer operations per fragment."""
+        after = self.zbuf.index_select(0, slot)
+        # x >> SHIFT == 0 exactly when 0 <= x < 2^SHIFT = 8 << 32: key gaps of at most 7 float32 steps
+        above = torch.sub(keys, after).sub_(1).bitwise_right_shift_(_GAP_SHIFT)   # 0: lost to a near key
+        if before is None:
+            idx = (above == 0).nonzero().squeeze(1)
+        else:
+            below = torch.sub(before, keys).bitwise_right_shift_(_GAP_SHIFT)     # 0: displaced a near key
+            idx = (torch.mul(below, above) == 0).nonzero().squeeze(1)       # (both are small after the shift)
+        if idx.numel() == 0:
+            return
+        s = slot.index_select(0, idx)
+        self.slots.append(s)
+        self.faces.append(keys.index_select(0, idx) & 0xFFFFFFFF)
+        pairs = ((above, after),) if before is None else ((below, before), (above, after))
+        for gap, other in pairs:
+            other = other.index_select(0, idx)
+            i = ((gap.index_select(0, idx) == 0) & (other != EMPTY_KEY)).nonzero().squeeze(1)
+            self.slots.append(s.index_select(0, i))
+            self.faces.append(other.index_select(0, i) & 0xFFFFFFFF)
+
+    def resolve(self, faces: torch.Tensor, depth_of) -> torch.Tensor:
+        """``faces`` (N,) (the float32 winners) with the noted slots decided by ``depth_of(slots, faces)``,
+        float64 depths (``_nearest``: ties within TIE_RTOL to the lower face id)."""
+        if not self.slots:
+            return faces
+        slots = torch.cat(self.slots)
+        tied = torch.unique(slots)
+        slots = torch.cat([slots, tied])
+        cand = torch.cat(self.faces + [faces.index_select(0, tied)])
+        best = _nearest(slots, depth_of(slots, cand), cand, faces.numel())
+        return faces.index_put((tied,), best.index_select(0, tied))
+
+
+def _nearest(slot, depth, face, n: int) -> torch.Tensor:
+    """The z-buffer without packing: per slot (n of them) the face of least depth, where depths within
+    ``TIE_RTOL`` (relative) of the least are a tie that goes to the lower face id; -1 where no fragment.
+    slot, depth, face: (M,), depths in float64."""
+    nearest = torch.full((n,), float("inf"), dtype=depth.dtype, device=depth.device)
+    nearest.scatter_reduce_(0, slot, depth, reduce="amin")
+    least = nearest.index_select(0, slot)
+    win = (depth <= least + TIE_RTOL * least.abs()).nonzero().squeeze(1)
+    best = torch.full((n,), torch.iinfo(torch.int64).max, dtype=torch.int64, device=depth.device)
+    best.scatter_reduce_(0, slot.index_select(0, win), face.index_select(0, win), reduce="amin")
+    return torch.where(best == torch.iinfo(torch.int64).max, torch.full_like(best, -1), best)
+
+
+def _depth_at(st: "_ScreenTriangles", camera, faces, x, y) -> torch.Tensor:
+    """Float64 camera-space depth of each face (M,) at screen points x, y (M,): its screen-affine q there."""
+    q0, qx, qy = _plane(st)
+    tri_of_face = torch.zeros(int(st.face.max()) + 1, dtype=torch.int64, device=st.face.device)
+    tri_of_face[st.face] = torch.arange(st.face.numel(), device=st.face.device)   # any piece: one plane
+    t = tri_of_face.index_select(0, faces)
+    q = q0.index_select(0, t) + qx.index_select(0, t) * x + qy.index_select(0, t) * y
+    return q if camera.orthographic else q.reciprocal()
 
 
 
@@ -220,6 +331,8 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
     zbuf = torch.full((H * W,), EMPTY_KEY, dtype=torch.int64, device=st.xy.device)
     if st.face.numel() == 0:
         return torch.full_like(zbuf, -1)
+    ties = _NearTies(zbuf) if REFINE_TIES else None
+    filled = False
     for chunk in _chunks(st, W, H, budget):
         pixel, q, face = _scan_convert(chunk, W, H)
         depth = q.float() if camera.orthographic else q.float().reciprocal_()
@@ -227,8 +340,16 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
             ok = (depth <= camera.far).nonzero().squeeze(1)
             pixel, depth, face = pixel[ok], depth[ok], face[ok]
         keys = _depth_keys(depth, face, positive=not camera.orthographic)  # orthographic z may round to -0.0
+        before = zbuf.index_select(0, pixel) if ties is not None and filled else None
         zbuf.scatter_reduce_(0, pixel, keys, reduce="amin")
-    return _faces_of(zbuf)
+        filled = True                                                       # before the first chunk: all empty
+        if ties is not None:
+            ties.check(pixel, keys, before)
+    faces = _faces_of(zbuf)
+    if ties is None:
+        return faces
+    centre = lambda slots: ((slots % W).double() + 0.5, (slots // W).double() + 0.5)   # noqa: E731
+    return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *centre(slots)))
 
 
 
@@ -252,6 +373,14 @@ def pixel_triangle_pairs(xy, width: int, height: int, mask=None):
     device = xy.device
     if xy.dim() != 3 or xy.shape[1:] != (3, 2):
         raise ValueError(f"xy must have shape (T, 3, 2), got {tuple(xy.shape)}")
+    _check_finite(xy, "xy")
+    width, height = _check_count(width, "width", minimum=0), _check_count(height, "height", minimum=0)
+    if mask is not None:
+        mask = torch.as_tensor(mask, device=device)
+        if mask.dtype != torch.bool:
+            raise TypeError(f"mask must be a bool tensor, got dtype {mask.dtype}")
+        if mask.numel() != width * height:
+            raise ValueError(f"mask must have H*W = {width * height} entries, got {mask.numel()}")
     none = torch.zeros(0, dtype=torch.int64, device=device)
     if xy.shape[0] == 0 or width <= 0 or height <= 0:
         return none, none
@@ -287,9 +416,7 @@ def pixel_triangle_pairs(xy, width: int, height: int, mask=None):
     count = (col1 - col0 + 1).clamp(min=0).long()                           # empty where off the image
     base = (row * width + col0.clamp(max=width - 1)).long()                 # (only empty segments move)
     if mask is not None:                                                    # skip segments with no wanted pixel
-        mask = torch.as_tensor(mask, device=device).reshape(-1).bool()
-        if mask.numel() != width * height:
-            raise ValueError(f"mask must have H*W = {width * height} entries, got {mask.numel()}")
+        mask = mask.reshape(-1)
         cum = torch.cat([torch.zeros(1, dtype=torch.int64, device=device), torch.cumsum(mask.long(), 0)])
         wanted = (cum.index_select(0, base + count) - cum.index_select(0, base)) > 0
         count = count * wanted
@@ -334,6 +461,7 @@ def _sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets, budget=CHUNK[
     slot_of[pixels] = torch.arange(P, device=device)
     q0, qx, qy = _plane(st)
     pixel, tri = pixel_triangle_pairs(st.xy, W, H, slot_of >= 0)
+    ties = _NearTies(zbuf) if REFINE_TIES else None
     step = max(1, budget // S)
     for lo in range(0, pixel.numel(), step):                                # bounded memory: step * S samples
         pix, t = pixel[lo:lo + step], tri[lo:lo + step]
@@ -347,7 +475,20 @@ def _sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets, budget=CHUNK[
         p = points[n, s]
         q = q0.index_select(0, tn) + qx.index_select(0, tn) * p[:, 0] + qy.index_select(0, tn) * p[:, 1]
         depth = q.float() if camera.orthographic else q.float().reciprocal_()
-        ok = depth <= camera.far
-        keys = _depth_keys(depth[ok], st.face.index_select(0, tn)[ok], positive=not camera.orthographic)
-        zbuf.scatter_reduce_(0, (slot.index_select(0, n) * S + s)[ok], keys, reduce="amin")
-    return _faces_of(zbuf).view(P, S)
+        ok = (depth <= camera.far).nonzero().squeeze(1)
+        face, target = st.face.index_select(0, tn).index_select(0, ok), (slot.index_select(0, n) * S + s)[ok]
+        keys = _depth_keys(depth.index_select(0, ok), face, positive=not camera.orthographic)
+        before = zbuf.index_select(0, target) if ties is not None and lo > 0 else None   # first step: empty
+        zbuf.scatter_reduce_(0, target, keys, reduce="amin")
+        if ties is not None:
+            ties.check(target, keys, before)
+    faces = _faces_of(zbuf)
+    if ties is None:
+        return faces.view(P, S)
+
+    def sample_point(slots):
+        p, s = slots // S, slots % S
+        pix = pixels.index_select(0, p)
+        off = offsets[s] if offsets.dim() == 2 else offsets[p, s]
+        return (pix % W).double() + off[:, 0], (pix // W).double() + off[:, 1]
+    return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *sample_point(slots))).view(P, S)

@@ -37,7 +37,7 @@ from typing import Sequence, Union
 
 import torch
 
-from course.tensors import as_tensor
+from course.tensors import _check_finite, _check_real, as_tensor
 from course.textures import mip_level, mip_pyramid, sample_texture, sample_texture_mip, uv_derivatives
 
 __all__ = [
@@ -73,7 +73,9 @@ class DirectionalLight:
 
     def incident(self, points_world: torch.Tensor):
         """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
-        d = as_tensor(self.direction, dtype=points_world.dtype, device=points_world.device, name="direction")
+        d = _light_vector(self.direction, "DirectionalLight.direction", points_world)
+        if float(d.detach().norm()) == 0:
+            raise ValueError("DirectionalLight.direction must be a non-zero vector (the way the light travels)")
         light_dir = normalize(-d).expand_as(points_world)
         return light_dir, _radiance(self.color, self.intensity, points_world).expand_as(points_world)
 
@@ -93,7 +95,7 @@ class PointLight:
 
     def incident(self, points_world: torch.Tensor):
         """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
-        p = as_tensor(self.position, dtype=points_world.dtype, device=points_world.device, name="position")
+        p = _light_vector(self.position, "PointLight.position", points_world)
         to_light = p - points_world                                          # (..., 3)
         radiance = _radiance(self.color, self.intensity, points_world)
         if self.falloff:
@@ -102,11 +104,25 @@ class PointLight:
         return normalize(to_light), radiance.expand_as(points_world)
 
 
+def _light_vector(v, name: str, like: torch.Tensor) -> torch.Tensor:
+    """A light's direction or position: (3,) finite, in ``like``'s dtype and device."""
+    v = as_tensor(v, dtype=like.dtype, device=like.device, name=name)
+    if v.shape != (3,):
+        raise ValueError(f"{name} must have shape (3,), got {tuple(v.shape)}")
+    _check_finite(v, name)
+    return v
+
+
 def _radiance(color, intensity, like: torch.Tensor) -> torch.Tensor:
     """color × intensity as an RGB tensor (3,) of ``like``'s dtype and device."""
     c = as_tensor(color, dtype=like.dtype, device=like.device, name="light color")
     k = as_tensor(intensity, dtype=like.dtype, device=like.device, name="light intensity")
-    return c.expand(3) * k
+    if c.shape not in ((), (1,), (3,)):
+        raise ValueError(f"light color must be one number or RGB (3,), got shape {tuple(c.shape)}")
+    if k.numel() != 1:
+        raise ValueError(f"light intensity must be one number, got shape {tuple(k.shape)}")
+    _check_finite(c, "light color"), _check_finite(k, "light intensity")
+    return c.expand(3) * k.reshape(())
 
 
 # ---------------------------------------------------------------------------------------------- material
@@ -138,6 +154,7 @@ def normalize(v, eps: float = EPS) -> torch.Tensor:
     """v: (..., 3) → unit vectors (..., 3). A zero vector stays zero (no NaN, in value or gradient):
     the length is ``sqrt(max(|v|², eps))``."""
     v = as_tensor(v, name="vector")
+    _check_finite(v, "vector")
     return v / (v * v).sum(-1, keepdim=True).clamp_min(eps).sqrt()
 
 
@@ -146,10 +163,31 @@ def _dot(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return (a * b).sum(-1)
 
 
+def _vectors(x, name: str, like: torch.Tensor | None = None) -> torch.Tensor:
+    """(..., 3) direction vectors, finite; with ``like``, in its dtype and device and broadcastable to it."""
+    x = as_tensor(x, name=name) if like is None else as_tensor(x, dtype=like.dtype, device=like.device, name=name)
+    if x.shape[-1:] != (3,):
+        raise ValueError(f"{name} must have shape (..., 3), got {tuple(x.shape)}")
+    if like is not None:
+        _check_broadcast(x, like, name)
+    _check_finite(x, name)
+    return x
+
+
+def _check_broadcast(x: torch.Tensor, like: torch.Tensor, name: str) -> None:
+    """x must broadcast to like's shape (never enlarge it)."""
+    try:
+        ok = torch.broadcast_shapes(x.shape, like.shape) == like.shape
+    except RuntimeError:
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must have shape {tuple(like.shape)} or broadcast to it, got {tuple(x.shape)}")
+
+
 def _unit_pair(normal, light_dir):
     """Tensors of one dtype/device (the normal's), both normalised."""
-    n = as_tensor(normal, name="normal")
-    l = as_tensor(light_dir, dtype=n.dtype, device=n.device, name="light_dir")
+    n = _vectors(normal, "normal")
+    l = _vectors(light_dir, "light_dir", n)
     return normalize(n), normalize(l)
 
 
@@ -161,7 +199,7 @@ def lambert(normal, light_dir, albedo) -> torch.Tensor:
     d/dn is ``albedo ⊗ l`` where n·l > 0 and 0 elsewhere (clamp's subgradient).
     """
     n, l = _unit_pair(normal, light_dir)
-    albedo = as_tensor(albedo, dtype=n.dtype, device=n.device, name="albedo")
+    albedo = _vectors(albedo, "albedo", n)
     cos = _dot(n, l).clamp_min(0.0)                                          # (N,)
     return albedo * cos[..., None]
 
@@ -176,6 +214,10 @@ def _highlight(cos: torch.Tensor, lit: torch.Tensor, shininess) -> torch.Tensor:
     on = lit & (cos > 0)
     safe = torch.where(on, cos, torch.ones_like(cos))
     s = as_tensor(shininess, dtype=cos.dtype, device=cos.device, name="shininess")
+    _check_broadcast(s, cos, "shininess")
+    _check_finite(s, "shininess")
+    if bool((s.detach() < 0).any()):
+        raise ValueError(f"shininess must be >= 0 (the highlight's exponent), got {float(s.detach().min()):g}")
     return torch.where(on, safe ** s, torch.zeros_like(cos))
 
 
@@ -187,7 +229,7 @@ def blinn_phong(normal, light_dir, view_dir, shininess) -> torch.Tensor:
     highlight). The peak, 1, is where h = n: the surface would mirror the light into the eye.
     """
     n, l = _unit_pair(normal, light_dir)
-    v = normalize(as_tensor(view_dir, dtype=n.dtype, device=n.device, name="view_dir"))
+    v = normalize(_vectors(view_dir, "view_dir", n))
     h = normalize(l + v)                                                     # half vector (zero if l = -v)
     lit = _dot(n, l) > 0
     return _highlight(_dot(n, h), lit, shininess)
@@ -200,7 +242,7 @@ def phong(normal, light_dir, view_dir, shininess) -> torch.Tensor:
     exponent Phong's highlight is tighter (r·v falls off about twice as fast as n·h).
     """
     n, l = _unit_pair(normal, light_dir)
-    v = normalize(as_tensor(view_dir, dtype=n.dtype, device=n.device, name="view_dir"))
+    v = normalize(_vectors(view_dir, "view_dir", n))
     n_dot_l = _dot(n, l)
     r = 2 * n_dot_l[..., None] * n - l                                       # mirror of l about n, unit
     return _highlight(_dot(r, v), n_dot_l > 0, shininess)
@@ -209,7 +251,17 @@ def phong(normal, light_dir, view_dir, shininess) -> torch.Tensor:
 def _factor(x, like: torch.Tensor, name: str) -> torch.Tensor:
     """A material factor (scalar, (3,) or (..., 3)) as a tensor broadcastable to ``like`` (..., 3)."""
     t = as_tensor(x, dtype=like.dtype, device=like.device, name=name)
-    return t[..., None] if t.dim() >= 1 and t.shape[-1] != 3 else t          # (N,) per-point scalars → (N, 1)
+    given = tuple(t.shape)
+    t = t[..., None] if t.dim() >= 1 and t.shape[-1] != 3 else t            # (N,) per-point scalars → (N, 1)
+    try:
+        ok = torch.broadcast_shapes(t.shape, like.shape) == like.shape
+    except RuntimeError:
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be one number, RGB (3,), or one of those per point, got shape "
+                         f"{given} for points of shape {tuple(like.shape)}")
+    _check_finite(t, name)
+    return t
 
 
 def light_terms(points_world, normals, view_dirs, lights, material: Material | None = None):
@@ -221,9 +273,14 @@ def light_terms(points_world, normals, view_dirs, lights, material: Material | N
     top. Gouraud shading interpolates these two across a face; Phong shading evaluates them per pixel.
     """
     material = material or Material()
-    p = as_tensor(points_world, name="points_world")
-    n = normalize(as_tensor(normals, dtype=p.dtype, device=p.device, name="normals"))
-    v = as_tensor(view_dirs, dtype=p.dtype, device=p.device, name="view_dirs")
+    if not isinstance(material, Material):
+        raise TypeError(f"material must be a Material, got {type(material).__name__}")
+    if isinstance(lights, (AmbientLight, DirectionalLight, PointLight)) or not hasattr(lights, "__iter__"):
+        raise TypeError(f"lights must be a sequence of lights, got {type(lights).__name__} (wrap one light in a "
+                        "list: [light])")
+    p = _vectors(points_world, "points_world")
+    n = normalize(_vectors(normals, "normals", p))
+    v = _vectors(view_dirs, "view_dirs", p)
     kd = _factor(material.diffuse, p, "material.diffuse")
     ks = _factor(material.specular, p, "material.specular")
     highlight = blinn_phong if material.specular_model == "blinn_phong" else phong
@@ -251,8 +308,7 @@ def shade(points_world, normals, view_dirs, base_color, lights, material: Materi
     lights; material: a :class:`Material` (default ``Material()``). Returns (..., 3), linear RGB, unclamped.
     """
     diffuse, specular = light_terms(points_world, normals, view_dirs, lights, material)
-    base = as_tensor(base_color, dtype=diffuse.dtype, device=diffuse.device, name="base_color")
-    return base * diffuse + specular
+    return _combine(base_color, diffuse, specular)
 
 
 # ------------------------------------------------------------------------------------ Fragments plumbing
@@ -260,9 +316,25 @@ def shade(points_world, normals, view_dirs, base_color, lights, material: Materi
 def view_directions(points_world: torch.Tensor, camera) -> torch.Tensor:
     """points_world: (..., 3) → unit directions (..., 3) toward the camera: to the eye for a perspective
     camera, the constant ``-forward`` (minus the third row of R) for an orthographic one."""
+    _check_camera(camera)
     if camera.orthographic:
         return (-camera.R[2]).to(points_world.dtype).expand_as(points_world)
     return normalize(camera.eye.to(points_world.dtype) - points_world)
+
+
+def _check_camera(camera) -> None:
+    from course.raster import _is_camera
+    if not _is_camera(camera):
+        raise TypeError(f"camera must be a course.camera.Camera, got {type(camera).__name__}")
+
+
+def _check_fragments(fragments, mesh=None) -> None:
+    """Fragments from rasterize / raycast (face_id (H, W), bary (H, W, 3)), their faces inside ``mesh``."""
+    if not (hasattr(fragments, "face_id") and hasattr(fragments, "bary")):
+        raise TypeError(f"fragments must be Fragments (from rasterize or raycast), got {type(fragments).__name__}")
+    if mesh is not None and fragments.face_id.numel() and int(fragments.face_id.max()) >= mesh.faces.shape[0]:
+        raise ValueError(f"fragments reference face {int(fragments.face_id.max())} but the mesh has "
+                         f"{mesh.faces.shape[0]} faces: were they rasterized from this mesh?")
 
 
 def _face_material(material, index, like):
@@ -295,6 +367,7 @@ def flat_shading(mesh, fragments, camera, lights, material, base_color) -> torch
     texture still varies across a face). material: a Material, or ``(materials, face_material (F,))``.
     Returns (H, W, 3); empty pixels get face 0's lighting (finite) and are meant to be composited away.
     """
+    _check_fragments(fragments, mesh), _check_camera(camera)
     centroids = mesh.verts[mesh.faces].mean(1)                               # (F, 3) world
     mat = _face_material(material, torch.arange(mesh.num_faces, device=mesh.faces.device), centroids)
     diffuse_f, specular_f = light_terms(centroids, mesh.face_normals(), view_directions(centroids, camera),
@@ -311,8 +384,9 @@ def gouraud_shading(mesh, fragments, camera, lights, material, base_color, vert_
     ``mesh.vertex_normals()``. Returns (H, W, 3).
     """
     from course.raster import interpolate
+    _check_fragments(fragments, mesh), _check_camera(camera)
     verts = mesh.verts                                                       # (V, 3) world
-    normals = mesh.vertex_normals() if vert_normals is None else vert_normals
+    normals = mesh.vertex_normals() if vert_normals is None else _vert_normals(vert_normals, verts)
     mat = _face_material(material, torch.arange(mesh.num_verts, device=mesh.faces.device), verts)
     diffuse_v, specular_v = light_terms(verts, normals, view_directions(verts, camera), lights, mat)
     diffuse = interpolate(diffuse_v, fragments, mesh.faces)                  # (H, W, 3)
@@ -327,7 +401,8 @@ def phong_shading(mesh, fragments, camera, lights, material, base_color, vert_no
     unit per-pixel normals (H, W, 3) (zero where nothing is hit).
     """
     from course.raster import interpolate
-    normals_v = mesh.vertex_normals() if vert_normals is None else vert_normals
+    _check_fragments(fragments, mesh), _check_camera(camera)
+    normals_v = mesh.vertex_normals() if vert_normals is None else _vert_normals(vert_normals, mesh.verts)
     points = interpolate(mesh.verts, fragments, mesh.faces)                  # (H, W, 3) world
     normals = normalize(interpolate(normals_v, fragments, mesh.faces))       # (H, W, 3) unit (0 if empty)
     mat = _face_material(material, fragments.face_id, points)
@@ -335,8 +410,16 @@ def phong_shading(mesh, fragments, camera, lights, material, base_color, vert_no
     return _combine(base_color, diffuse, specular), normals
 
 
+def _vert_normals(vert_normals, verts) -> torch.Tensor:
+    n = as_tensor(vert_normals, dtype=verts.dtype, device=verts.device, name="vert_normals")
+    if n.shape != verts.shape:
+        raise ValueError(f"vert_normals must have shape (V, 3) = {tuple(verts.shape)}, got {tuple(n.shape)}")
+    _check_finite(n, "vert_normals")
+    return n
+
+
 def _combine(base_color, diffuse, specular):
-    base = as_tensor(base_color, dtype=diffuse.dtype, device=diffuse.device, name="base_color")
+    base = _vectors(base_color, "base_color", diffuse)
     return base * diffuse + specular
 
 
@@ -348,6 +431,7 @@ def edge_distance(mesh, fragments, camera) -> torch.Tensor:
     (twice the area of (a, b, p) over the base length). Vertices behind a perspective camera project to
     meaningless pixels, so edges of near-clipped faces may be misplaced.
     """
+    _check_fragments(fragments, mesh), _check_camera(camera)
     H, W = fragments.face_id.shape
     mask = fragments.face_id >= 0
     verts_screen, _ = camera.project(mesh.verts)                             # (V, 2) pixel coordinates
@@ -370,9 +454,16 @@ def wireframe_overlay(image, mesh, fragments, camera, width: float = 1.0, color=
     the line, fading linearly over one pixel at its border (a cheap antialiased line). Only edges of the
     faces that win the z-test are drawn, so hidden lines are removed for free.
     """
+    width = _check_real(width, "width", low=0, low_open=True)
     d = edge_distance(mesh, fragments, camera)                               # (H, W) pixels
+    image = as_tensor(image, dtype=d.dtype if not torch.is_tensor(image) else None, device=d.device, name="image")
+    if image.shape != (*d.shape, 3):
+        raise ValueError(f"image must have the fragments' shape (H, W, 3) = {(*d.shape, 3)}, got "
+                         f"{tuple(image.shape)}")
     coverage = (width / 2 + 0.5 - d).clamp(0, 1)[..., None].to(image.dtype)  # (H, W, 1); 0 where empty
     line = as_tensor(color, dtype=image.dtype, device=image.device, name="wireframe color")
+    if line.shape not in ((), (3,)):
+        raise ValueError(f"color must be RGB (3,), got shape {tuple(line.shape)}")
     return image * (1 - coverage) + line * coverage
 
 
@@ -391,6 +482,7 @@ def linear_to_srgb(linear) -> torch.Tensor:
     everywhere; the power branch only ever sees x >= 0.0031308, so its gradient stays finite (a "safe where").
     """
     x = as_tensor(linear, name="linear colour")
+    _check_finite(x, "linear colour", allow_inf=True)
     curve = x > SRGB_LINEAR_MAX
     safe = torch.where(curve, x, torch.ones_like(x))                        # keeps x^(1/2.4)'s gradient finite
     return torch.where(curve, 1.055 * safe ** (1 / 2.4) - 0.055, 12.92 * x)
@@ -404,6 +496,7 @@ def srgb_to_linear(encoded) -> torch.Tensor:
     255 first (integers are only converted to torch's default dtype). Differentiable everywhere.
     """
     c = as_tensor(encoded, name="sRGB colour")
+    _check_finite(c, "sRGB colour", allow_inf=True)
     curve = c > SRGB_ENCODED_MAX
     safe = torch.where(curve, c, torch.ones_like(c))
     return torch.where(curve, ((safe + 0.055) / 1.055) ** 2.4, c / 12.92)

@@ -47,7 +47,7 @@ import torch
 from .camera import Camera, project_points
 from .raster import rasterize
 from .shading import DirectionalLight, PointLight
-from .tensors import _check_shape, as_tensor
+from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "light_space", "biased_depth",
            "biased_lit", "pcf", "shadow_factor", "area_light_samples", "area_shadow_factor"]
@@ -111,12 +111,32 @@ def _light_kind(light) -> str:
 
 
 def _check_resolution(resolution) -> int:
-    if isinstance(resolution, bool) or int(resolution) != resolution or resolution < 1:
-        raise ValueError(f"resolution must be a positive integer (texels per side), got {resolution!r}")
-    return int(resolution)
+    return _check_count(resolution, "resolution", hint=" (texels per side)")
+
+
+def _check_pcf(k, name: str) -> int:
+    """An odd positive integer (the size of a k×k filter); a ValueError naming ``name`` otherwise."""
+    try:
+        ok = _check_count(k, name) % 2 == 1
+    except ValueError:
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be an odd integer >= 1 (the k of a k×k filter), got {k!r}")
+    return int(k)
+
+
+def _check_angle(angle, name: str) -> float:
+    """An angle in (0, 180) degrees (a cone's or a field of view's); a ValueError naming ``name`` otherwise."""
+    try:
+        return _check_real(angle, name, low=0, high=180, low_open=True, high_open=True)
+    except ValueError:
+        raise ValueError(f"{name} must be in (0, 180) degrees, got {angle!r}") from None
 
 
 def _as_meshes(meshes) -> tuple:
+    if not hasattr(meshes, "verts") and not isinstance(meshes, (list, tuple)):
+        raise TypeError(f"expected a Mesh or a non-empty sequence of Meshes (objects with verts and faces), got "
+                        f"{type(meshes).__name__}")
     meshes = (meshes,) if hasattr(meshes, "verts") else tuple(meshes)
     if not meshes or not all(hasattr(m, "verts") and hasattr(m, "faces") for m in meshes):
         raise TypeError("expected a Mesh or a non-empty sequence of Meshes (objects with verts and faces)")
@@ -130,9 +150,7 @@ def _bounds(meshes_or_bounds):
             and isinstance(mb[1], numbers.Real)):
         center = as_tensor(mb[0], name="center")
         _check_shape(center, (3,), "center")
-        if not mb[1] > 0:
-            raise ValueError(f"the bounding radius must be positive, got {mb[1]}")
-        return center, float(mb[1])
+        return center, _check_real(mb[1], "the bounding radius", low=0, low_open=True)
     verts = torch.cat([m.verts.detach().reshape(-1, 3) for m in _as_meshes(mb)])
     if verts.shape[0] == 0:
         raise ValueError("the meshes have no vertices to fit a light camera to")
@@ -172,8 +190,7 @@ def light_camera(light, meshes_or_bounds, *, resolution: int, margin: float = 1.
     """
     kind = _light_kind(light)
     res = _check_resolution(resolution)
-    if not margin >= 1:
-        raise ValueError(f"margin must be >= 1, got {margin}")
+    margin = _check_real(margin, "margin", low=1)
     center, radius = _bounds(meshes_or_bounds)
     r = radius * margin
     look = dict(width=res, height=res)
@@ -186,8 +203,7 @@ def light_camera(light, meshes_or_bounds, *, resolution: int, margin: float = 1.
     dist = float((center - pos).norm())
     near, far = max(dist - r, 1e-3 * r), dist + r
     if kind == "spot":
-        if not 0 < light.angle < 180:
-            raise ValueError(f"SpotLight.angle must be in (0, 180) degrees, got {light.angle}")
+        _check_angle(light.angle, "SpotLight.angle")
         d = _unit(light.direction, "light.direction", center)
         return Camera.look_at(pos, pos + d, _up_for(d), fov_y=float(light.angle), near=near, far=far, **look)
     cams = []
@@ -212,6 +228,7 @@ def shadow_map(mesh, light, resolution: int = 1024, *, bounds=None, margin: floa
     Returns a ``ShadowMap`` whose depth (C, H, W) has the mesh's dtype and device, detached.
     """
     meshes = _as_meshes(mesh)
+    cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     if len(meshes) == 1:
         geo = meshes[0]
     else:
@@ -250,7 +267,7 @@ def light_space(points, K, R=None, t=None, orthographic: bool = False) -> torch.
         raise TypeError("light_space needs a Camera, or K, R and t: light_space(points, K, R, t, orthographic)")
     pts = as_tensor(points, name="points")
     _check_shape(pts, (None, 3), "points")
-    xy, depth = project_points(pts, K, R, t, orthographic=bool(orthographic))
+    xy, depth = project_points(pts, K, R, t, orthographic=_check_flag(orthographic, "orthographic"))
     return torch.cat([xy, depth[:, None]], 1)
 
 
@@ -268,7 +285,18 @@ def biased_depth(z, texel, tan_theta, bias: float, slope_bias: float) -> torch.T
     orthographic, ``z / fx`` perspective); tan_theta: (N,) (or a scalar) tan θ, θ between the normal and the
     direction to the light, already clamped; bias: world units; slope_bias: texels. Returns (N,) in z's dtype.
     """
-    return z - (bias + slope_bias * texel * tan_theta)
+    z = as_tensor(z, name="z")
+    _check_finite(z, "z")
+    terms = {}
+    for name, v in (("texel", texel), ("tan_theta", tan_theta)):
+        t = as_tensor(v, dtype=z.dtype, device=z.device, name=name)
+        if t.dim() > 1 or (t.dim() == 1 and t.shape != z.shape):
+            raise ValueError(f"{name} must be a scalar or have z's shape {tuple(z.shape)}, got {tuple(t.shape)}")
+        _check_finite(t, name)
+        terms[name] = t
+    bias = _check_real(bias, "bias")
+    slope_bias = _check_real(slope_bias, "slope_bias")
+    return z - (bias + slope_bias * terms["texel"] * terms["tan_theta"])
 
 
 def biased_lit(z, stored, texel, tan_theta, bias: float, slope_bias: float) -> torch.Tensor:
@@ -285,6 +313,7 @@ def biased_lit(z, stored, texel, tan_theta, bias: float, slope_bias: float) -> t
         raise ValueError(f"z must have shape (N,), one depth per point, got {tuple(z.shape)}")
     if stored.shape != z.shape:
         raise ValueError(f"stored must have one depth per point, shape {tuple(z.shape)}, got {tuple(stored.shape)}")
+    _check_finite(z, "z"), _check_finite(stored, "stored", allow_inf=True)     # +inf: an empty texel
     return _not_behind(biased_depth(z, texel, tan_theta, bias, slope_bias), stored)
 
 
@@ -301,20 +330,21 @@ def pcf(depth_map, coords, depths, k: int = 1, *, outside: str = "lit") -> torch
     Returns (N,) in depth_map's dtype (depths are compared in that dtype), each value a multiple of 1 / k².
     It filters the 0/1 comparisons, never the depths.
     """
-    if isinstance(k, bool) or int(k) != k or k < 1 or k % 2 == 0:
-        raise ValueError(f"k must be an odd integer >= 1 (the size of the k×k filter), got {k!r}")
+    k = _check_pcf(k, "k")
     if outside not in ("lit", "clamp"):
         raise ValueError(f"outside must be 'lit' or 'clamp', got {outside!r}")
     depth_map = as_tensor(depth_map, name="depth_map")
-    if depth_map.dim() != 2:
-        raise ValueError(f"depth_map must be one (H, W) map, got shape {tuple(depth_map.shape)}")
+    if depth_map.dim() != 2 or depth_map.shape[0] == 0 or depth_map.shape[1] == 0:
+        raise ValueError(f"depth_map must be one (H, W) map, not empty, got shape {tuple(depth_map.shape)}")
+    _check_finite(depth_map, "depth_map", allow_inf=True)                    # +inf: an empty texel
     coords = as_tensor(coords, name="coords")
     _check_shape(coords, (None, 2), "coords")
     depths = as_tensor(depths, dtype=depth_map.dtype, device=depth_map.device, name="depths")
     if depths.shape != coords.shape[:1]:
         raise ValueError(f"depths must have one value per point, shape ({coords.shape[0]},), got "
                          f"{tuple(depths.shape)}")
-    k, (H, W) = int(k), depth_map.shape
+    _check_finite(depths, "depths")
+    H, W = depth_map.shape
     col = coords[:, 0].floor().long().clamp(0, W - 1)
     row = coords[:, 1].floor().long().clamp(0, H - 1)
     flat = depth_map.reshape(-1)
@@ -360,8 +390,7 @@ def shadow_factor(points_world, normals, shadow_map: ShadowMap, *, bias: float |
     """
     if not isinstance(shadow_map, ShadowMap):
         raise TypeError(f"shadow_map must be a ShadowMap, got {type(shadow_map).__name__}")
-    if isinstance(pcf, bool) or int(pcf) != pcf or pcf < 1 or pcf % 2 == 0:
-        raise ValueError(f"pcf must be an odd integer >= 1 (the k of a k×k filter), got {pcf!r}")
+    pcf = _check_pcf(pcf, "pcf")
     pts = as_tensor(points_world, name="points_world")
     _check_shape(pts, (None, 3), "points_world")
     dtype = torch.promote_types(pts.dtype, shadow_map.depth.dtype)
@@ -373,9 +402,9 @@ def shadow_factor(points_world, normals, shadow_map: ShadowMap, *, bias: float |
         if nrm.shape[0] != pts.shape[0]:
             raise ValueError(f"normals must have one row per point: {nrm.shape[0]} normals, {pts.shape[0]} points")
         nrm = nrm.detach().to(dtype=dtype, device=device)
-    bias = 1e-3 * shadow_map.radius if bias is None else float(bias)
-    if not (math.isfinite(bias) and math.isfinite(slope_bias) and slope_bias >= 0 and 0 <= max_slope < math.inf):
-        raise ValueError(f"need finite bias and slope_bias >= 0, max_slope >= 0, got {bias}, {slope_bias}, {max_slope}")
+    bias = 1e-3 * shadow_map.radius if bias is None else _check_real(bias, "bias")
+    slope_bias = _check_real(slope_bias, "slope_bias", low=0)
+    max_slope = _check_real(max_slope, "max_slope", low=0)
     with torch.no_grad():
         return _factor(pts, None if normals is None else nrm, shadow_map, bias, float(slope_bias),
                        float(max_slope), int(pcf))
@@ -455,9 +484,7 @@ def area_light_samples(kind: str, center, normal, size, n: int, *, u_axis=None, 
     """
     if kind not in ("rectangle", "disk"):
         raise ValueError(f"kind must be 'rectangle' or 'disk', got {kind!r}")
-    if isinstance(n, bool) or int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n!r}")
-    n = int(n)
+    n = _check_count(n, "n")
     c = as_tensor(center, dtype=dtype, device=device, name="center")
     _check_shape(c, (3,), "center")
     nz = _unit(normal, "normal", c)
@@ -473,9 +500,15 @@ def area_light_samples(kind: str, center, normal, size, n: int, *, u_axis=None, 
         raise ValueError("u_axis must not be parallel to normal")
     u = u / u.norm()
     v = torch.linalg.cross(nz, u)
-    sizes = [float(s) for s in (size if isinstance(size, (tuple, list)) else (size, size))]
-    if len(sizes) != 2 or not all(s > 0 and math.isfinite(s) for s in sizes):
-        raise ValueError(f"size must be positive (a side, (width, height), or a disk's radius), got {size!r}")
+    pair = isinstance(size, (tuple, list)) or (isinstance(size, torch.Tensor) and size.dim() == 1)
+    sizes = list(size) if pair else [size, size]
+    try:
+        if len(sizes) != 2 or (kind == "disk" and pair):
+            raise ValueError
+        sizes = [_check_real(s, "size", low=0, low_open=True) for s in sizes]
+    except ValueError:
+        raise ValueError(f"size must be positive (a side, (width, height), or a disk's radius), finite, got "
+                         f"{size!r}") from None
     rows, cols = _grid(n)
     gen = _generator(seed)
     jitter = torch.rand(n, 2, generator=gen, dtype=torch.float64)
@@ -515,6 +548,12 @@ def area_shadow_factor(points_world, normals, mesh, samples, *, resolution: int 
         raise ValueError("samples must hold at least one point on the light")
     pts = as_tensor(points_world, name="points_world")
     _check_shape(pts, (None, 3), "points_world")
+    _check_resolution(resolution), _check_pcf(pcf, "pcf"), _check_angle(fov, "fov")
+    if light_normal is not None:
+        light_normal = as_tensor(light_normal, name="light_normal")
+        _check_shape(light_normal, (3,), "light_normal")
+        if float(light_normal.norm()) == 0:
+            raise ValueError("light_normal must be a non-zero vector")
     total = None
     for p in smp.unbind(0):
         pos = tuple(float(v) for v in p)

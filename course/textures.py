@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import torch
 
-from course.tensors import as_tensor
+from course.tensors import _as_faces, _check_count, _check_finite, as_tensor
 
 __all__ = ["sample_texture", "mip_level", "mip_pyramid", "uv_derivatives", "sample_texture_mip"]
 
@@ -33,11 +33,13 @@ def sample_texture(texture, uv, mode: str = "bilinear") -> torch.Tensor:
     tex = as_tensor(texture, name="texture")
     if tex.dim() == 2:
         tex = tex[..., None]
-    if tex.dim() != 3 or tex.shape[0] == 0 or tex.shape[1] == 0:
-        raise ValueError(f"texture must have shape (Ht, Wt, C), got {tuple(tex.shape)}")
+    if tex.dim() != 3 or tex.shape[0] == 0 or tex.shape[1] == 0 or tex.shape[2] == 0:
+        raise ValueError(f"texture must have shape (Ht, Wt, C), none of them 0, got {tuple(tex.shape)}")
+    _check_finite(tex, "texture")
     uv = as_tensor(uv, dtype=tex.dtype, device=tex.device, name="uv")
     if uv.shape[-1:] != (2,):
         raise ValueError(f"uv must have shape (..., 2), got {tuple(uv.shape)}")
+    _check_finite(uv, "uv", allow_inf=True)                                 # ±inf clamps to the edge
     Ht, Wt, _ = tex.shape
     uv = torch.nan_to_num(uv, nan=0.0, posinf=2.0, neginf=-1.0)             # keep the index math finite
     x = uv[..., 0] * Wt - 0.5                                                # texel column; centres at integers
@@ -71,7 +73,12 @@ def mip_level(duv_dx, duv_dy, texture_size) -> torch.Tensor:
     dy = as_tensor(duv_dy, dtype=dx.dtype, device=dx.device, name="duv_dy")
     if dx.shape != dy.shape or dx.shape[-1:] != (2,):
         raise ValueError(f"duv_dx and duv_dy must both have shape (N, 2), got {tuple(dx.shape)} and {tuple(dy.shape)}")
-    height, width = (float(s) for s in texture_size)
+    _check_finite(dx, "duv_dx", allow_inf=True), _check_finite(dy, "duv_dy", allow_inf=True)
+    if isinstance(texture_size, torch.Size):
+        texture_size = tuple(texture_size)
+    if not isinstance(texture_size, (tuple, list)) or len(texture_size) != 2:
+        raise ValueError(f"texture_size must be (Ht, Wt), level 0's size in texels, got {texture_size!r}")
+    height, width = (float(_check_count(s, "texture_size")) for s in texture_size)
     texels = torch.tensor([width, height], dtype=dx.dtype, device=dx.device)   # u counts columns, v rows
     rho = torch.maximum(torch.linalg.vector_norm(dx * texels, dim=-1),
                         torch.linalg.vector_norm(dy * texels, dim=-1))         # (N,) footprint in texels
@@ -120,6 +127,7 @@ def mip_pyramid(texture) -> list:
     tex = as_tensor(texture, name="texture")
     if tex.dim() not in (2, 3) or tex.shape[0] == 0 or tex.shape[1] == 0:
         raise ValueError(f"texture must have shape (Ht, Wt, C) or (Ht, Wt), got {tuple(tex.shape)}")
+    _check_finite(tex, "texture")
     levels = [tex]
     while levels[-1].shape[0] > 1 or levels[-1].shape[1] > 1:
         levels.append(_halve(_halve(levels[-1], 0), 1))
@@ -150,18 +158,22 @@ def uv_derivatives(uvs, faces, fragments, verts, camera):
     gradient: it only picks a level, so it runs under ``torch.no_grad()`` and returns detached tensors.
     Faces seen edge-on give huge (finite) derivatives, i.e. the coarsest level.
     """
+    from course.raster import _is_camera
+    if not _is_camera(camera):
+        raise TypeError(f"camera must be a course.camera.Camera, got {type(camera).__name__}")
+    if not (hasattr(fragments, "face_id") and hasattr(fragments, "bary")):
+        raise TypeError(f"fragments must be Fragments (from rasterize or raycast), got {type(fragments).__name__}")
     with torch.no_grad():
         verts = as_tensor(verts, name="verts").detach()
         dtype = torch.promote_types(verts.dtype, camera.dtype)
         verts = verts.to(dtype)
         uvs = as_tensor(uvs, dtype=dtype, device=verts.device, name="uvs").detach()
-        faces = torch.as_tensor(faces, device=verts.device).long()
         if verts.dim() != 2 or verts.shape[1] != 3:
             raise ValueError(f"verts must have shape (V, 3), got {tuple(verts.shape)}")
         if uvs.shape != (verts.shape[0], 2):
             raise ValueError(f"uvs must have shape (V, 2) = ({verts.shape[0]}, 2), got {tuple(uvs.shape)}")
-        if faces.dim() != 2 or faces.shape[1] != 3:
-            raise ValueError(f"faces must have shape (F, 3), got {tuple(faces.shape)}")
+        _check_finite(verts, "verts"), _check_finite(uvs, "uvs")
+        faces = _as_faces(faces, "faces", num_verts=verts.shape[0], device=verts.device)
         face_id = fragments.face_id
         if fragments.bary.shape != (*face_id.shape, 3):
             raise ValueError(f"fragments.bary must have shape {(*face_id.shape, 3)}, got "
@@ -233,6 +245,7 @@ def sample_texture_mip(texture, uv, duv_dx, duv_dy) -> torch.Tensor:
     uv = as_tensor(uv, dtype=tex0.dtype, device=tex0.device, name="uv")
     if uv.shape[-1:] != (2,):
         raise ValueError(f"uv must have shape (..., 2), got {tuple(uv.shape)}")
+    _check_finite(uv, "uv", allow_inf=True)
     dx = as_tensor(duv_dx, dtype=tex0.dtype, device=tex0.device, name="duv_dx").detach()
     dy = as_tensor(duv_dy, dtype=tex0.dtype, device=tex0.device, name="duv_dy").detach()
     if dx.shape != uv.shape or dy.shape != uv.shape:

@@ -9,6 +9,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
+from .tensors import _check_count
+
 __all__ = ["to_numpy", "show_image", "image_grid", "signed_image", "show_depth", "plot_points_3d", "plot_mesh_3d",
            "plot_triangles_2d", "pixel_grid", "explorer", "image_stats"]
 
@@ -40,6 +42,12 @@ def show_image(image, title: str | None = None, ax=None, srgb: bool = True, **im
     An (H, W) image is a quantity drawn through a colour map and is never encoded.
     """
     a = to_numpy(image)
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[-1] in (1, 3, 4))) or a.shape[0] == 0 or a.shape[1] == 0:
+        raise ValueError(f"image must be a non-empty (H, W), (H, W, 3) or (H, W, 4) image, got shape {a.shape}")
+    if a.dtype.kind not in "biuf":
+        raise ValueError(f"image must hold numbers, got dtype {a.dtype}")
+    if a.ndim == 3 and a.shape[-1] == 1:
+        a = a[..., 0]                                                       # (H, W, 1): a quantity, like (H, W)
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4))
     if a.ndim == 3 and a.shape[-1] in (3, 4):
@@ -59,8 +67,12 @@ def show_image(image, title: str | None = None, ax=None, srgb: bool = True, **im
 def image_grid(images, titles=None, cols: int | None = None, size: float = 3.0, srgb: bool = True, **imshow_kw):
     """Several images side by side; colour images are sRGB-encoded for display unless ``srgb=False``
     (see :func:`show_image`). Returns the figure."""
+    if isinstance(images, (str, bytes)) or not hasattr(images, "__len__") or len(images) == 0:
+        raise ValueError("images must be a non-empty list of images")
     n = len(images)
-    cols = cols or n
+    if titles is not None and (isinstance(titles, str) or len(titles) != n):
+        raise ValueError(f"titles must be None or one per image ({n}), got {titles!r}")
+    cols = n if cols is None else _check_count(cols, "cols")
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(size * cols, size * rows), squeeze=False)
     for k, ax in enumerate(axes.flat):
@@ -97,6 +109,8 @@ def signed_image(values, title: str | None = None, ax=None):
 def plot_points_3d(points, colors=None, ax=None, size: float = 4.0, title: str | None = None):
     """A 3-D scatter of points (N, 3) in world space (+y up)."""
     p = to_numpy(points)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
     if ax is None:
         fig = plt.figure(figsize=(4, 4))
         ax = fig.add_subplot(projection="3d")
@@ -132,6 +146,7 @@ def _label_axes(ax, title):
 
 def pixel_grid(width: int, height: int, ax=None, centres: bool = True):
     """Draw the pixel squares [j, j+1) × [i, i+1) and, optionally, their centres, in image coordinates."""
+    width, height = _check_count(width, "width"), _check_count(height, "height")
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4 * height / width))
     for x in range(width + 1):
@@ -294,6 +309,9 @@ def plot_image_points(pixels, width: int, height: int, ax=None, colors=None, siz
     ``margin`` (a fraction of the image size) widens the view to show points that fall outside.
     """
     p = to_numpy(pixels)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"pixels must have shape (N, 2), (x, y) image coordinates, got {p.shape}")
+    width, height = _check_count(width, "width"), _check_count(height, "height")
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4 * height / width))
     ax.plot([0, width, width, 0, 0], [0, 0, height, height, 0], color="0.3", lw=1)

@@ -250,16 +250,16 @@ def save_gif(frames, path, *, fps: float = 8, loop: int = 0, labels=None, scale:
     for k, f in enumerate(frames):
         if f.shape != frames[0].shape:
             raise ValueError(f"frames of mixed shapes: frame 0 is {frames[0].shape[:2]}, frame {k} {f.shape[:2]}")
-    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+    if isinstance(fps, bool) or not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps!r}")
-    if not (isinstance(loop, int) and loop >= 0):
+    if isinstance(loop, bool) or not (isinstance(loop, int) and loop >= 0):
         raise ValueError(f"loop must be a non-negative integer, got {loop!r}")
     if labels is not None and (isinstance(labels, str) or len(labels) != len(frames)):
         raise ValueError(f"labels must be None or one string per frame ({len(frames)}), got {labels!r}")
     H, W = frames[0].shape[:2]
     if scale is None:
         scale = max(1, math.ceil(GIF_MIN_SIDE / min(H, W)))
-    if not (isinstance(scale, int) and scale >= 1):
+    if isinstance(scale, bool) or not (isinstance(scale, int) and scale >= 1):
         raise ValueError(f"scale must be a positive integer or None, got {scale!r}")
     images = []
     for k, f in enumerate(frames):

@@ -130,7 +130,7 @@ def test_dtype_and_numpy_inputs_kept():
 def test_bad_camera_inputs():
     with pytest.raises(ValueError, match=r"K must have shape \(3, 3\)"):
         Camera(torch.eye(2), torch.eye(3), torch.zeros(3), 4, 4)
-    with pytest.raises(ValueError, match="image size"):
+    with pytest.raises(ValueError, match="height must be a positive integer"):
         Camera(torch.eye(3), torch.eye(3), torch.zeros(3), 4, -1)
     with pytest.raises(ValueError, match="near"):
         Camera(torch.eye(3), torch.eye(3), torch.zeros(3), 4, 4, near=0.0)

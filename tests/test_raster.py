@@ -386,7 +386,7 @@ def test_bad_inputs_raise_clear_errors():
     bad.faces[0, 0] = -1
     with pytest.raises(ValueError, match="negative vertex index"):
         rasterize(bad, cam)
-    with pytest.raises(ValueError, match="image size"):
+    with pytest.raises(ValueError, match="width must be a positive integer"):
         Camera.look_at((0.0, 0.0, 5.0), fov_y=60, width=0, height=8)
     with pytest.raises(ValueError, match="attr"):
         interpolate(torch.zeros(5), rasterize(icosphere(0), cam), icosphere(0).faces)
@@ -433,3 +433,96 @@ def test_a_million_faces_at_1024_stay_under_2_gb():
     peak_mb = (kb("VmHWM:") - base) / 1024
     assert peak_mb < 2048, f"peak {peak_mb:.0f} MB"
     assert 0.70 < fr.mask.float().mean() < 0.78                             # the sphere's disc, radius asin(1/3)
+
+
+# ------------------------------------------------------------------------------------- near-ties in depth
+
+def two_planes(d0, separation, orthographic):
+    """Two parallel squares facing a camera at the origin that looks along +z: the far one at depth
+    ``d0 (1 + separation)`` holds faces 0 and 1 (the lower ids), the near one at ``d0`` faces 2 and 3. Every
+    pixel of the 6 x 6 image is covered by both."""
+    square = lambda z: [[-1, -1, z], [1, -1, z], [1, 1, z], [-1, 1, z]]        # noqa: E731
+    verts = torch.tensor(square(d0 * (1 + separation)) + square(d0), dtype=torch.float64)
+    faces = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    view = dict(ortho_height=1.0) if orthographic else dict(fov_y=20.0)
+    cam = Camera.look_at((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), width=6, height=6, dtype=torch.float64, **view)
+    return Mesh(verts, faces), cam
+
+
+# d0: depths where the float32 keys of the two planes tie at separation 3.3e-8 (then the lower face id, the far
+# plane, wins without the float64 refinement); 1e-5 is far above float32's step
+@pytest.mark.parametrize("orthographic, d0", [(False, 3.7), (True, 2.0)])
+@pytest.mark.parametrize("separation", [3.3e-8, 1e-5])
+def test_near_ties_rasterize_raycast_and_exact_coverage_agree(orthographic, d0, separation, monkeypatch):
+    """Surfaces 3.3e-8 apart in relative depth look the same to a float32 key; rasterize re-decides such
+    near-ties in float64 and shows the nearer plane, as raycast (float64 t) and exact_coverage do."""
+    from course.coverage import exact_coverage
+    from course.raytrace import raycast
+    mesh, cam = two_planes(d0, separation, orthographic)
+    near = lambda face_id: bool((face_id >= 2).all())                          # noqa: E731
+    assert near(rasterize(mesh, cam).face_id)
+    assert near(rasterize(mesh, cam, samples=[[0.25, 0.25], [0.5, 0.5], [0.9, 0.1]]).face_id)
+    assert near(rasterize_naive(mesh, cam).face_id)
+    assert near(raycast(mesh, cam).face_id)
+    colors = torch.tensor([[1.0, 0.0, 0.0]] * 2 + [[0.0, 1.0, 0.0]] * 2, dtype=torch.float64)
+    image = exact_coverage(mesh, cam, colors)                                  # every pixel fully covered
+    torch.testing.assert_close(image, colors[2].expand(6, 6, 3))
+    if separation < 1e-7:                                                      # float32 keys alone: a tie
+        monkeypatch.setattr(scan, "REFINE_TIES", False)
+        assert bool((rasterize(mesh, cam).face_id <= 1).all())                  # the lower id, the far plane
+
+
+@pytest.mark.parametrize("orthographic", [False, True])
+def test_depth_ties_below_float32_follow_float64_and_rounding_ties_the_lower_face_id(orthographic):
+    """Apart by 1e-10 (float64 sees it, float32 does not): the nearer plane in rasterize and raycast. Apart by
+    1e-13 or coincident: float64 rounding, a tie (scan.TIE_RTOL = 1e-12), the lower face id in rasterize."""
+    from course.raytrace import raycast
+    mesh, cam = two_planes(2.0, 1e-10, orthographic)
+    for face_id in (rasterize(mesh, cam).face_id, raycast(mesh, cam).face_id,
+                    rasterize(mesh, cam, samples=[[0.3, 0.6]]).face_id, rasterize_naive(mesh, cam).face_id):
+        assert bool((face_id >= 2).all())
+    for separation in (1e-13, 0.0):
+        mesh, cam = two_planes(2.0, separation, orthographic)
+        for face_id in (rasterize(mesh, cam).face_id, rasterize(mesh, cam, samples=[[0.3, 0.6]]).face_id,
+                        rasterize_naive(mesh, cam).face_id):
+            assert bool((face_id <= 1).all())
+    assert bool((raycast(mesh, cam).face_id <= 1).all())                       # coincident: equal t, lower id
+
+
+@pytest.mark.parametrize("far_first", [True, False])
+@pytest.mark.parametrize("orthographic, d0", [(False, 3.7), (True, 2.0)])
+def test_near_ties_across_chunks(far_first, orthographic, d0):
+    """One triangle per chunk (and a few samples per step): a near-tie found when a later chunk displaces a
+    key (far plane first) or loses to one (near plane first) is decided in float64 all the same."""
+    mesh, cam = two_planes(d0, 3.3e-8, orthographic)
+    faces = mesh.faces if far_first else mesh.faces.flip(0)
+    near_ids = (2, 3) if far_first else (0, 1)
+    verts, faces = raster._check_inputs(Mesh(mesh.verts, faces), cam)
+    for reach in (0.5, 0.0):
+        st = raster._screen_triangles(raster._camera_space(verts, cam), faces, cam, False, reach=reach)
+        if reach:
+            face_id = scan._zbuffer(st, cam, budget=(1, 1))
+        else:
+            pixels = torch.arange(36)
+            offsets = torch.tensor([[0.25, 0.25], [0.75, 0.5]], dtype=torch.float64)
+            face_id = scan._sample_zbuffer(st, cam, pixels, offsets, budget=2)
+        assert all(int(f) in near_ids for f in face_id.reshape(-1))
+
+
+def test_near_tie_notes_catch_a_displaced_key():
+    """The float32 keys can even swap two surfaces (two roundings): a later fragment whose key is a few steps
+    *below* the one it displaces is noted with it, and float64 depth decides between them."""
+    zbuf = torch.full((2,), scan.EMPTY_KEY, dtype=torch.int64)
+    ties = scan._NearTies(zbuf)
+    key = lambda bits, face: torch.tensor([(bits << 32) | face])                # noqa: E731
+    for k, first in ((key(1000, 5), True), (key(998, 7), False), (key(1200, 9), False)):
+        before = None if first else zbuf.index_select(0, torch.tensor([0]))
+        zbuf.scatter_reduce_(0, torch.tensor([0]), k, reduce="amin")
+        ties.check(torch.tensor([0]), k, before)
+    noted = sorted(int(f) for f in torch.cat(ties.faces))
+    assert 5 in noted and 7 in noted and 9 not in noted                        # 1200 is far behind
+    depth = {5: 1.0, 7: 1.0 + 1e-9, 9: 2.0}                                     # face 5 is nearer in float64
+    faces = scan._faces_of(zbuf)                                                # float32: face 7 won
+    assert int(faces[0]) == 7 and int(faces[1]) == -1
+    out = ties.resolve(faces, lambda s, f: torch.tensor([depth[int(x)] for x in f], dtype=torch.float64))
+    assert out.tolist() == [5, -1]
