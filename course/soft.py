@@ -18,7 +18,11 @@ summed (fig. 3). Rows give the gradient of x, columns that of y. Because of the 
 not equal ``backward(g) + backward(h)``. Two choices of ours, both options: δx is floored at
 ``min_step`` pixels (0.5 by default: the secant has a pole where an edge already passes through the centre),
 and only pixels within ``reach`` pixels of an edge along the row or column are visited (None: the whole
-row, as in the paper).
+row, as in the paper). With reach None that is every pixel of every row a face spans, hundreds of millions of
+(pixel, edge) terms on a big mesh: the pixels near a face's span are visited one by one, CHUNK at a time
+(``_nmr_pixels``), and those farther than ``min_step`` beyond it, where only covering is possible and the
+floor never applies, as one table per image row, (faces crossing the row) × (its pixels), whose sums
+need no per-pixel bookkeeping (``_nmr_row_tables``).
 
 **Soft rasterization** (Liu, Li, Chen and Li, "Soft Rasterizer", ICCV 2019), ``soft_rasterize``. Every face
 covers every pixel a little: ``D = sigmoid(δ d² / σ)``, with d the distance from the pixel centre to the
@@ -35,8 +39,11 @@ one; see ``_nearness``) and the background C_b is one more term at z = ε. Every
 1e-5. Only (pixel, face) pairs that can matter are computed: a face's weight relative to the largest term
 at the pixel must reach ``threshold`` (sigmoid *and* softmax factor, so the error stays bounded as γ → 0).
 The candidates come from a screen-space radius around each face (``_candidate_pairs``, row by row as in
-``scan.pixel_triangle_pairs``), and the per-pair work runs on (N,) vectors of pairs, chunked, so no
-faces × pixels tensor is ever formed. Faces crossing the near plane are clipped there, as ``rasterize`` does.
+``scan.pixel_triangle_pairs``), built for a group of faces at a time (about CHUNK pairs) and thresholded
+group by group, so only the pairs that matter are ever stored (at γ = 1e-4 a 512² image has some 10⁸
+candidates and a few million that matter); the per-pair work runs on (N,) vectors of pairs, chunked, each
+chunk's graph recomputed during backward instead of stored, so no faces × pixels tensor is ever formed.
+Faces crossing the near plane are clipped there, as ``rasterize`` does.
 
 The limits: σ → 0 alone makes each D a step, but a fixed γ still blends overlapping faces; γ → 0 alone
 picks the nearest face among all those with D > 0, and every face has D > 0 everywhere, so a nearer face
@@ -56,11 +63,14 @@ from torch.utils.checkpoint import checkpoint
 from .camera import world_to_camera
 from .raster import _camera_space, _check_inputs, _clip_near, _project, rasterize
 from .scan import _expand, _max3, _min3
-from .tensors import as_tensor
+from .tensors import _as_index, _check_finite, _check_flag, _check_real, as_tensor
 
 __all__ = ["soft_rasterize", "nmr_rasterize", "nmr_image", "NMRGradient"]
 
-CHUNK = 1 << 18      # (pixel, face) pairs computed at once: bounds the memory of the intermediates
+CHUNK = 1 << 18      # (pixel, face) pairs or NMR's (pixel, edge) terms computed at once: bounds the memory of
+                     # the intermediates (the tests set it small to force many chunks)
+ROW_TABLES = 0.25    # NMR's backward visits the pixels beyond min_step as per-row tables when reach is longer
+                     # than this fraction of a row (reach None: always), else pixel by pixel
 
 
 # -------------------------------------------------------------------------------- shared: screen triangles
@@ -123,6 +133,32 @@ def _nearness(q, camera):
 
 # ------------------------------------------------------------------------------------- soft rasterization
 
+def _groups(count, size):
+    """Consecutive ranges ``(lo, hi)`` of the items 0..n-1, each holding about ``size`` of the work ``count``
+    (n,) int64 (at most size plus one item's count): how the loops below cut their work into chunks. No
+    items: one empty range, so that an empty mesh still runs (and backpropagates) through the same code."""
+    if count.numel() == 0:
+        return [(0, 0)]
+    before = torch.cumsum(count, 0) - count                                 # the work of the items before each
+    _, n = torch.unique_consecutive(torch.div(before, size, rounding_mode="floor"), return_counts=True)
+    ends = torch.cumsum(n, 0).tolist()
+    return list(zip([0] + ends[:-1], ends))
+
+
+def _pad(xy, radius):
+    """(T,) the candidate radius in pixels, plus a margin for rounding."""
+    return 1e-9 * (1 + xy.abs().amax((1, 2))) + radius
+
+
+def _triangle_groups(xy, radius, W, H):
+    """Consecutive groups ``(lo, hi)`` of the triangles, about CHUNK candidate pairs each. A triangle's pairs
+    lie in its bounding box widened by the radius, whose pixel count bounds their number."""
+    pad = _pad(xy, radius)[:, None]
+    first = torch.ceil(xy.amin(1) - pad - 0.5).clamp(min=0)                # (T, 2) first column, first row
+    last = torch.minimum(torch.floor(xy.amax(1) + pad - 0.5), xy.new_tensor([W - 1, H - 1]))
+    return _groups((last - first + 1).clamp(min=0).prod(1).long(), CHUNK)
+
+
 def _candidate_pairs(xy, radius, W, H):
     """Every (pixel, triangle) pair whose pixel centre may lie within ``radius`` pixels of the triangle.
 
@@ -130,8 +166,10 @@ def _candidate_pairs(xy, radius, W, H):
     Row by row (centre y_c), the triangle is cut to the band [y_c - r, y_c + r] (as in
     ``scan.pixel_triangle_pairs``); the band's x-extent widened by r gives the columns. Conservative: every
     point within r of the triangle is listed; a few pixels near the corners farther than r are too.
+    Each triangle's pairs depend on it alone, so a group of triangles (``_triangle_groups``) gives the same
+    pairs as the whole mesh, in the same order.
     """
-    pad = 1e-9 * (1 + xy.abs().amax((1, 2))) + radius                       # (T,) r and rounding
+    pad = _pad(xy, radius)                                                  # (T,) r and rounding
     y = xy[..., 1]
     first = torch.ceil(_min3(y) - pad - 0.5).clamp(min=0)
     last = torch.floor(_max3(y) + pad - 0.5).clamp(max=H - 1)
@@ -203,26 +241,40 @@ def _pair_terms(xy, tri, pixel, W, s, bary: bool = True):
 
 
 def _check_soft(mode, sigma, gamma, threshold, eps):
-    if mode not in ("silhouette", "color"):
+    """The checked scalar options of ``soft_rasterize``, as floats (ValueError naming the one that is wrong)."""
+    if not isinstance(mode, str) or mode not in ("silhouette", "color"):
         raise ValueError(f"mode must be 'silhouette' or 'color', got {mode!r}")
-    for name, value in (("sigma", sigma), ("gamma", gamma)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    if not (0 < threshold < 1):
-        raise ValueError(f"threshold must lie in (0, 1), got {threshold!r}")
-    if not (0 <= eps < 1):
-        raise ValueError(f"eps (the background's normalised depth) must lie in [0, 1), got {eps!r}")
+    sigma = _check_real(sigma, "sigma", low=0, low_open=True)
+    gamma = _check_real(gamma, "gamma", low=0, low_open=True)
+    threshold = _check_real(threshold, "threshold", low=0, high=1, low_open=True, high_open=True)
+    eps = _check_real(eps, "eps (the background's normalised depth)", low=0, high=1, high_open=True)
+    return sigma, gamma, threshold, eps
 
 
 def _colors(face_colors, vertex_colors, verts, faces, dtype):
-    """Checked colour arguments: (F, C) face colours or (V, C) vertex colours (exactly one)."""
+    """Checked colour arguments: (F, C) face colours or (V, C) vertex colours (exactly one), finite, C >= 1.
+    Integers become floats (as ``as_tensor`` does everywhere); the dtype is promoted with the mesh's."""
     if (face_colors is None) == (vertex_colors is None):
         raise ValueError("mode='color' needs exactly one of face_colors (F, C) or vertex_colors (V, C)")
     name, n = ("face_colors", faces.shape[0]) if vertex_colors is None else ("vertex_colors", verts.shape[0])
     c = as_tensor(face_colors if vertex_colors is None else vertex_colors, device=verts.device, name=name)
-    if c.dim() != 2 or c.shape[0] != n:
-        raise ValueError(f"{name} must have shape ({n}, C), got {tuple(c.shape)}")
+    if c.dim() != 2 or c.shape[0] != n or c.shape[1] < 1:
+        raise ValueError(f"{name} must have shape ({n}, C) with C >= 1 channels, got {tuple(c.shape)}")
+    _check_finite(c, name)
     return c.to(torch.promote_types(dtype, c.dtype))
+
+
+def _background(background, C, dtype, device):
+    """The background as (C,): a number (or one-element array) for every channel, or one value per channel;
+    finite. A ValueError naming ``background`` otherwise (``expand`` would fail, or broadcast silently)."""
+    bg = as_tensor(background, dtype=dtype, device=device, name="background")
+    if bg.numel() == 1:
+        bg = bg.reshape(1)
+    elif tuple(bg.shape) != (C,):
+        raise ValueError(f"background must be a number or ({C},), one value per channel, got shape "
+                         f"{tuple(bg.shape)}")
+    _check_finite(bg, "background")
+    return bg.expand(C)
 
 
 def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-4, gamma: float = 1e-4,
@@ -234,7 +286,8 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     orthographic). mode: ``"silhouette"`` returns (H, W), the probabilistic OR ``1 - Π (1 - D_j)``;
     ``"color"`` returns (H, W, C), the softmax over depth with the background as one more term, the colour of
     a face being ``face_colors`` (F, C) or ``vertex_colors`` (V, C) interpolated with perspective-correct
-    barycentrics (clamped to the triangle outside it). background: (C,) or a number.
+    barycentrics (clamped to the triangle outside it); finite, integers are taken as floats.
+    background: (C,) or a number (colour mode; a silhouette's background is 0).
     sigma: sharpness, in the paper's NDC units (image width 2): ``σ_px = σ W² / 4`` px².
     gamma: the depth softmax's temperature; z is the normalised inverse depth (``_nearness``); eps: the
     background's z. threshold: a pair (pixel, face) is skipped when its term, relative to the pixel's
@@ -244,22 +297,33 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     ``r² = σ_px log(1/threshold)``; for colour the radius grows with ``(z_j - ε) / γ``, because a nearer face far
     outside a pixel can still outweigh the background (the fattening a tiny γ causes).
     cull_backfaces: skip faces facing away (front faces are CCW). Faces crossing the near plane are clipped.
-    Differentiable w.r.t. verts, the colours and the camera's K, R and t; dtype and device of the inputs.
+    A mesh without faces gives the background. Memory is bounded by CHUNK pairs, not by the number of
+    candidates. Differentiable w.r.t. verts, the colours and the camera's K, R and t; dtype and device of
+    the inputs.
     """
-    _check_soft(mode, sigma, gamma, threshold, eps)
+    sigma, gamma, threshold, eps = _check_soft(mode, sigma, gamma, threshold, eps)
+    cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
     dtype = torch.promote_types(verts.dtype, camera.dtype)
-    colors = None if mode == "silhouette" else _colors(face_colors, vertex_colors, verts, faces, dtype)
+    colors = bg = None
+    if mode == "color":
+        colors = _colors(face_colors, vertex_colors, verts, faces, dtype)
+        bg = _background(background, colors.shape[1], colors.dtype, verts.device)
     xy, q, face, attr = _screen_faces(verts, faces, camera, cull_backfaces,
                                       colors if vertex_colors is not None and mode == "color" else None)
     s = 4.0 / (W * W * sigma)                                               # 1 / σ_px
     x_max = math.log(1 / threshold)                                         # sigmoid(-x) >= thr ⇒ x <= this
     if mode == "silhouette":
         radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
-        pixel, tri = _candidate_pairs(xy.detach().double(), radius, W, H)
-        log_miss = _per_pair(_silhouette_terms, tri, pixel, xy, W, s)      # (N,) log(1 - D_j)
-        log_empty = torch.zeros(H * W, dtype=dtype, device=verts.device).index_add(0, pixel, log_miss)
+        xy64 = xy.detach().double()
+        groups = _triangle_groups(xy64, radius, W, H)
+        log_empty = torch.zeros(H * W, dtype=dtype, device=verts.device)
+        for lo, hi in groups:
+            # each group of triangles adds its log(1 - D_j) to its pixels; with several groups, a group's
+            # pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all)
+            log_empty = log_empty + _checkpointed(len(groups) > 1, _silhouette_group, xy, xy64, radius, lo, hi,
+                                                  W, H, s)
         return (-torch.expm1(log_empty)).view(H, W)                         # 1 - Π (1 - D_j), stably
     near = _nearness(q.detach().double(), camera)                           # (T, 3) z of the corners
     x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma              # (T,) largest useful x
@@ -268,37 +332,69 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     w, wc = _per_pair(_color_terms, tri, pixel, xy, q, face, colors if attr is None else attr, W, s, gamma,
                       (top - z_top / gamma).to(dtype), z_top.to(dtype), camera)   # (N,), (N, C)
     w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
-    C = wc.shape[1]
-    bg = as_tensor(background, dtype=wc.dtype, device=wc.device, name="background").expand(C)
+    C = colors.shape[1]
     num = (w_bg[:, None] * bg).index_add(0, pixel, wc)                      # (H*W, C)
     den = w_bg.index_add(0, pixel, w)
     return (num / den[:, None]).view(H, W, C)
 
 
+def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s):
+    """(H*W,) the sum of log(1 - D_j) over the triangles lo..hi-1 at each pixel: their candidates, then
+    ``_silhouette_terms``."""
+    pixel, tri = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)       # tri: 0..hi-lo-1
+    log_miss = _silhouette_terms(tri, pixel, xy[lo:hi], W, s)
+    return torch.zeros(H * W, dtype=xy.dtype, device=xy.device).index_add(0, pixel, log_miss)
+
+
 def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
     """Which pairs matter in colour mode, without gradients. xy: (T, 3, 2) detached, in the dtype the
     differentiable pass computes in (so both agree on what is kept); near: (T, 3) float64 corner z;
-    radius: (T,) the candidate radius in pixels. First every candidate's log-weight
-    ``log_w = logsigmoid(x) + z/γ`` (float64: z/γ reaches 1e5), then per pixel ``top``, the largest log_w
-    (at least the background's ε/γ), and ``z_top``, the largest z; a pair is kept if log_w - top >= log_thr.
-    Returns pixel (N,), tri (N,) of the kept pairs and top, z_top (H*W,) float64. The differentiable pass
-    takes each weight as ``exp((z - z_top)/γ + logsigmoid(x) - (top - z_top/γ))``: nothing of size 1/γ
-    reaches float32."""
-    pixel, tri = _candidate_pairs(xy.double(), radius, W, H)
+    radius: (T,) the candidate radius in pixels. Every candidate's log-weight is
+    ``log_w = logsigmoid(x) + z/γ`` (float64: z/γ reaches 1e5); per pixel ``top`` is the largest log_w (at
+    least the background's ε/γ) and ``z_top`` the largest z; a pair is kept if log_w - top >= log_thr.
+    Returns pixel (N,), tri (N,) of the kept pairs (grouped by triangle) and top, z_top (H*W,) float64.
+    The differentiable pass takes each weight as ``exp((z - z_top)/γ + logsigmoid(x) - (top - z_top/γ))``:
+    nothing of size 1/γ reaches float32.
+
+    The candidates (10⁸ on a big mesh at γ = 1e-4) are never all stored: they are built and weighed a
+    group of triangles at a time. ``top`` so far only grows, so a pair already below threshold relative to
+    it will be below it at the end too, and is dropped at once; the few survivors are checked again against
+    the final ``top`` (and pruned on the way whenever they pile up)."""
+    xy64 = xy.double()
     top = torch.full((H * W,), eps / gamma, dtype=torch.float64, device=xy.device)
     z_top = torch.full((H * W,), eps, dtype=torch.float64, device=xy.device)
-    log_w = torch.empty(pixel.shape, dtype=torch.float64, device=xy.device)
+    none = torch.zeros(0, dtype=torch.int64, device=xy.device)
+    kept = [(none, none, none.double())]                                    # (pixel, tri, log_w) survivors
+    n_kept, limit = 0, CHUNK
     with torch.no_grad():
-        for lo in range(0, pixel.numel(), CHUNK):                           # bounded memory
-            pix, t = pixel[lo:lo + CHUNK], tri[lo:lo + CHUNK]
+        for lo, hi in _triangle_groups(xy64, radius, W, H):
+            pix, t = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)
+            t = t + lo                                                      # the group's → the mesh's ids
             x, b = _pair_terms(xy, t, pix, W, s)                            # as stage B computes them
             nt = near.index_select(0, t)                                    # (n, 3) float64
             z = b[0] * nt[:, 0] + b[1] * nt[:, 1] + b[2] * nt[:, 2]         # z is affine in q
-            log_w[lo:lo + CHUNK] = torch.nn.functional.logsigmoid(x.double()) + z / gamma
+            log_w = torch.nn.functional.logsigmoid(x.double()) + z / gamma
             z_top.scatter_reduce_(0, pix, z, reduce="amax")
-        top.scatter_reduce_(0, pixel, log_w, reduce="amax")
-        keep = (log_w - top[pixel] >= log_thr).nonzero().squeeze(1)
+            top.scatter_reduce_(0, pix, log_w, reduce="amax")
+            ok = log_w - top[pix] >= log_thr                                # the best so far: a lower bound
+            kept.append((pix[ok], t[ok], log_w[ok]))
+            n_kept += kept[-1][0].numel()
+            if n_kept > limit:                                              # prune against the best so far
+                pixel, tri, lw = map(torch.cat, zip(*kept))
+                ok = lw - top[pixel] >= log_thr
+                kept = [(pixel[ok], tri[ok], lw[ok])]
+                n_kept = kept[0][0].numel()
+                limit = 2 * n_kept + CHUNK                                  # amortised: linear in the pairs
+        pixel, tri, log_w = map(torch.cat, zip(*kept))
+        keep = (log_w - top[pixel] >= log_thr).nonzero().squeeze(1)        # against the final top
     return pixel[keep], tri[keep], top, z_top
+
+
+def _checkpointed(recompute, fn, *args):
+    """``fn(*args)``; when ``recompute`` and a gradient is being recorded, through ``torch.utils.checkpoint``:
+    its graph is rebuilt during backward instead of stored, trading a second forward for memory."""
+    grad = torch.is_grad_enabled() and any(isinstance(a, torch.Tensor) and a.requires_grad for a in args)
+    return checkpoint(fn, *args, use_reentrant=False) if recompute and grad else fn(*args)
 
 
 def _per_pair(fn, tri, pixel, *args):
@@ -307,9 +403,8 @@ def _per_pair(fn, tri, pixel, *args):
     however many pairs σ and γ ask for; a single chunk (the common case) runs plainly."""
     if pixel.numel() <= CHUNK:
         return fn(tri, pixel, *args)
-    grad = torch.is_grad_enabled()
-    parts = [checkpoint(fn, tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args, use_reentrant=False) if grad
-             else fn(tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args) for lo in range(0, pixel.numel(), CHUNK)]
+    parts = [_checkpointed(True, fn, tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args)
+             for lo in range(0, pixel.numel(), CHUNK)]
     return tuple(map(torch.cat, zip(*parts))) if isinstance(parts[0], tuple) else torch.cat(parts)
 
 
@@ -355,31 +450,52 @@ class NMRGradient(torch.autograd.Function):
         return d_screen.to(verts_screen.dtype), d_image, None
 
 
+def _check_nmr_options(cull_backfaces, reach, min_step):
+    """cull_backfaces as a bool, reach as a float (None: inf) and min_step as a float, or a ValueError
+    naming the argument (a string, a bool, NaN, a negative number)."""
+    cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
+    reach = math.inf if reach is None else _check_real(reach, "reach (pixels, or None)", low=0, allow_inf=True)
+    min_step = _check_real(min_step, "min_step", low=0, low_open=True)
+    return cull_backfaces, reach, min_step
+
+
 def nmr_image(image, mesh, camera, face_id, *, face_values=None, background=0.0, cull_backfaces: bool = True,
               reach: float | None = None, min_step: float = 0.5) -> torch.Tensor:
     """Attach NMR's approximate visibility gradient to an image rendered from hard fragments.
 
-    image: (H, W, C) any shading of the fragments (its own gradient, e.g. to colours or through the
-    barycentrics, is kept); face_id: (H, W) int64 from the same ``rasterize`` call (-1: background).
-    face_values: optional (F, C), the colour a face would give a pixel it newly covers (flat shading);
-    without it, the colour of the face's nearest pixel along the row or column is used (the paper's code
-    does the same), and the pixel is skipped where that pixel does not show the face. background: (C,) or a
-    number, the colour beyond the image border. reach: how many pixels beyond an edge, along a row or
-    column, a pixel can be and still receive a gradient from it (None: the whole image). min_step: the
-    floor on |δx| in pixels. Faces crossing the near plane contribute no visibility gradient (their
-    projected vertices are meaningless), nor do faces entirely beyond the far plane. Returns the image's
-    values, with a backward that follows Kato et al.'s rule to ``mesh.verts`` and, through the projection,
-    to the camera's K, R and t.
+    image: (H, W, C) any shading of the fragments, finite (its own gradient, e.g. to colours or through the
+    barycentrics, is kept); face_id: (H, W) integer face ids from the same ``rasterize`` call (-1:
+    background). face_values: optional (F, C), the colour a face would give a pixel it newly covers (flat
+    shading); without it, the colour of the face's nearest pixel along the row or column is used (the
+    paper's code does the same), and the pixel is skipped where that pixel does not show the face.
+    background: (C,) or a number, the colour beyond the image border. reach: how many pixels beyond an edge,
+    along a row or column, a pixel can be and still receive a gradient from it (None: the whole image).
+    min_step: the floor on |δx| in pixels. Faces crossing the near plane contribute no visibility gradient
+    (their projected vertices are meaningless), nor do faces entirely beyond the far plane; a mesh without
+    faces gets a zero gradient. Returns the image's values, with a backward that follows Kato et al.'s
+    rule to ``mesh.verts`` and, through the projection, to the camera's K, R and t.
     """
     verts, faces = _check_inputs(mesh, camera)
+    cull_backfaces, reach, min_step = _check_nmr_options(cull_backfaces, reach, min_step)
     H, W = camera.height, camera.width
-    if image.dim() != 3 or tuple(image.shape[:2]) != (H, W):
-        raise ValueError(f"image must have shape (H, W, C) = ({H}, {W}, C), got {tuple(image.shape)}")
+    image = as_tensor(image, device=verts.device, name="image")
+    if image.dim() != 3 or tuple(image.shape[:2]) != (H, W) or image.shape[2] < 1:
+        raise ValueError(f"image must have shape (H, W, C) = ({H}, {W}, C) with C >= 1, got {tuple(image.shape)}")
+    _check_finite(image, "image")
+    C = image.shape[2]
+    face_id = _as_index(face_id, "face_id", device=verts.device)            # integers only: never rounded
     if tuple(face_id.shape) != (H, W):
         raise ValueError(f"face_id must have shape (H, W) = ({H}, {W}), got {tuple(face_id.shape)}")
-    if not (min_step > 0) or (reach is not None and not reach >= 0):
-        raise ValueError(f"need min_step > 0 and reach >= 0 (or None), got {min_step!r}, {reach!r}")
-    C = image.shape[2]
+    if face_id.numel() and not (-1 <= int(face_id.min()) and int(face_id.max()) < faces.shape[0]):
+        raise ValueError(f"face_id must hold -1 (background) or a face index below {faces.shape[0]}, got values "
+                         f"from {int(face_id.min())} to {int(face_id.max())}")
+    if face_values is not None:
+        face_values = as_tensor(face_values, device=verts.device, name="face_values").double()
+        if tuple(face_values.shape) != (faces.shape[0], C):
+            raise ValueError(f"face_values must have shape ({faces.shape[0]}, {C}) (faces, image channels), "
+                             f"got {tuple(face_values.shape)}")
+        _check_finite(face_values, "face_values")
+    bg = _background(background, C, torch.float64, verts.device)
     with torch.no_grad():
         v = _camera_space(verts, camera)                                    # (V, 3) float64
         z = v[faces][..., 2]
@@ -396,15 +512,9 @@ def nmr_image(image, mesh, camera, face_id, *, face_values=None, background=0.0,
         tri = faces[face_id.reshape(-1)[hit]]                               # (M, 3) the visible faces
         q_r, dq = _row_plane(xy[tri, 0], xy[tri, 1], nearness[tri], (hit // W).double() + 0.5)
         depth_q[hit] = q_r + dq * ((hit % W).double() + 0.5)               # their q at the pixel centres
-    if face_values is not None:
-        face_values = as_tensor(face_values, device=verts.device, name="face_values").double()
-        if tuple(face_values.shape) != (faces.shape[0], C):
-            raise ValueError(f"face_values must have shape ({faces.shape[0]}, {C}) (faces, image channels), "
-                             f"got {tuple(face_values.shape)}")
-    bg = as_tensor(background, dtype=torch.float64, device=verts.device, name="background").expand(C)
     scene = dict(faces=faces[fids], fids=fids, q=nearness, face_id=face_id.reshape(-1), depth_q=depth_q,
-                 face_values=face_values, bg=bg, H=H, W=W, ortho=camera.orthographic,
-                 reach=math.inf if reach is None else float(reach), min_step=float(min_step))
+                 face_values=face_values, bg=bg, H=H, W=W, ortho=camera.orthographic, reach=reach,
+                 min_step=min_step)
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     verts_cam = world_to_camera(verts.to(dtype), camera.R.to(dtype), camera.t.to(dtype))
     verts_screen, _ = _project_safe(verts_cam, camera, camera.K.to(dtype))  # (V, 2) differentiable
@@ -416,22 +526,32 @@ def nmr_rasterize(mesh, camera, *, face_colors=None, background=0.0, cull_backfa
     """The hard rasterizer's image with NMR's approximate gradient (Kato et al. 2018).
 
     face_colors: None for a silhouette, returned as (H, W) (1 where a face is visible); or (F, C) flat
-    face colours, returned as (H, W, C), background (C,) or a number elsewhere. reach, min_step: see
-    ``nmr_image``. Gradients flow to ``mesh.verts``, to ``face_colors`` and to the camera's K, R and t.
+    face colours (finite; integers are taken as floats), returned as (H, W, C) in the mesh's dtype promoted
+    with theirs, background (C,) or a number elsewhere. reach, min_step: see ``nmr_image``. A mesh without
+    faces gives the background and a zero gradient. Gradients flow to ``mesh.verts``, to ``face_colors``
+    and to the camera's K, R and t.
     """
     verts, faces = _check_inputs(mesh, camera)
-    frags = rasterize(mesh, camera, cull_backfaces=cull_backfaces)
+    cull_backfaces, reach, min_step = _check_nmr_options(cull_backfaces, reach, min_step)
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     if face_colors is None:
-        image = frags.mask.to(dtype)[..., None]                             # (H, W, 1)
         values = torch.ones(faces.shape[0], 1, dtype=dtype, device=verts.device)
     else:
         values = as_tensor(face_colors, device=verts.device, name="face_colors")
-        if values.dim() != 2 or values.shape[0] != faces.shape[0]:
-            raise ValueError(f"face_colors must have shape ({faces.shape[0]}, C), got {tuple(values.shape)}")
-        bg = as_tensor(background, dtype=values.dtype, device=values.device, name="background")
-        image = torch.where(frags.mask[..., None], values[frags.face_id.clamp(min=0)], bg.expand(values.shape[1]))
-    out = nmr_image(image, mesh, camera, frags.face_id, face_values=values.detach(), background=background,
+        if values.dim() != 2 or values.shape[0] != faces.shape[0] or values.shape[1] < 1:
+            raise ValueError(f"face_colors must have shape ({faces.shape[0]}, C) with C >= 1 channels, got "
+                             f"{tuple(values.shape)}")
+        _check_finite(values, "face_colors")
+        values = values.to(torch.promote_types(dtype, values.dtype))
+    bg = _background(background, values.shape[1], values.dtype, verts.device)
+    frags = rasterize(mesh, camera, cull_backfaces=cull_backfaces)
+    if face_colors is None:
+        image = frags.mask.to(dtype)[..., None]                             # (H, W, 1)
+    elif faces.shape[0] == 0:                                               # nothing to look up: the background
+        image = bg.expand(camera.height, camera.width, -1).clone()
+    else:
+        image = torch.where(frags.mask[..., None], values[frags.face_id.clamp(min=0)], bg)
+    out = nmr_image(image, mesh, camera, frags.face_id, face_values=values.detach(), background=bg.detach(),
                     cull_backfaces=cull_backfaces, reach=reach, min_step=min_step)
     return out[..., 0] if face_colors is None else out
 
@@ -447,14 +567,17 @@ def _nmr_backward(verts_screen, image, d_image, *, faces, fids, q, face_id, dept
     face_values = None if face_values is None else face_values.to(dt)
     img, g = image.detach().to(dt).reshape(H, W, -1), d_image.to(dt).reshape(H, W, -1)
     maps = dict(face_id=face_id.view(H, W), depth_q=depth_q.to(dt).view(H, W), image=img, g=g)
+    shown = torch.zeros(int(max(fids.max(), face_id.max())) + 1, dtype=torch.bool, device=d.device)
+    shown[face_id[face_id >= 0]] = True                                     # (faces) some pixel shows it
     for axis, (a, b, m) in enumerate(((u, v, maps), (v, u, {k: t.transpose(0, 1) for k, t in maps.items()}))):
         m = {k: t.reshape(t.shape[0] * t.shape[1], *t.shape[2:]) for k, t in m.items()}
         n_rows, n_cols = (H, W) if axis == 0 else (W, H)
-        d[:, axis] = _nmr_scan(a, b, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, reach, min_step)
+        d[:, axis] = _nmr_scan(a, b, q, faces, fids, shown, m, face_values, bg, n_rows, n_cols, ortho, reach,
+                               min_step)
     return d
 
 
-def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, reach, min_step):
+def _nmr_scan(u, v, q, faces, fids, shown, m, face_values, bg, n_rows, n_cols, ortho, reach, min_step):
     """∂L/∂u (V,) for the coordinate u along rows of constant v (the centrepiece of NMR's backward).
 
     For every face and every row whose centre v_c it spans, the two edges crossing the row at u_l <= u_r;
@@ -463,6 +586,9 @@ def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, r
     at this row), floored at ``min_step``; its colour would change by δI (covered: the face's colour, if the
     face is nearer than what is there; uncovered: the colour across the edge, if the face is the visible
     one). The term ∂L/∂I · δI / δx is kept only where ∂L/∂I · δI < 0.
+
+    This function lists the entries, one per (face, row, side), with what each pixel's term needs; the
+    pixels are visited by ``_nmr_pixels`` and, far beyond the span, by ``_nmr_row_tables``.
     """
     tu, tv, tq = u[faces], v[faces], q[faces]                               # (T, 3)
     first = torch.ceil(_min3(tv) - 0.5).clamp(min=0)                        # rows with centre in [v_min, v_max)
@@ -478,7 +604,8 @@ def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, r
     left = torch.where(valid, ue, math.inf).argmin(1, keepdim=True)         # (S, 1) edge index
     right = torch.where(valid, ue, -math.inf).argmax(1, keepdim=True)
     ok = (valid.sum(1) == 2).nonzero().squeeze(1)                           # a row meets exactly two edges
-    # one entry per (segment, side): side 0 the left edge (inside is +u), 1 the right edge (inside is -u)
+    # one entry per (segment, side): side 0 the left edge (inside is +u), 1 the right edge (inside is -u);
+    # entries [0, n) are the left edges of the rows ok lists, entries [n, 2n) their right edges
     seg = torch.cat([ok, ok])
     edge = torch.cat([left[ok, 0], right[ok, 0]])
     side = torch.cat([torch.zeros_like(ok), torch.ones_like(ok)]).to(u.dtype)
@@ -487,7 +614,7 @@ def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, r
     t, r = tri_of_seg[seg], row[seg]
     f, vid_a, vid_b = fids[t], faces[t, edge], faces[t, (edge + 1) % 3]
     base = r.long() * n_cols                                                # flat index of the row's start
-    img, g, face_id, depth_q = m["image"], m["g"], m["face_id"], m["depth_q"]
+    img, face_id = m["image"], m["face_id"]
     # uncovering (inside): the colour across the edge, the background beyond the border
     across = torch.where(side == 0, torch.ceil(u_e - 0.5) - 1, torch.floor(u_e - 0.5) + 1)
     a_ok = (across >= 0) & (across < n_cols)
@@ -502,31 +629,152 @@ def _nmr_scan(u, v, q, faces, fids, m, face_values, bg, n_rows, n_cols, ortho, r
     # the face's q along the row, q(u) = q_r + dq u: nearer than what a pixel shows if q(u_p) > depth_q
     # (q: 1/z, or -z for an orthographic camera: larger is nearer; -inf on the background)
     q_r, dq = _row_plane(tu[t], tv[t], tq[t], r + 0.5)
-    lo = torch.where(side == 0, torch.ceil(ul - reach - 0.5), torch.ceil(ul - 0.5)).clamp(min=0)
-    hi = torch.where(side == 0, torch.floor(ur - 0.5), torch.floor(ur + reach - 0.5)).clamp(max=n_cols - 1)
-    elem, e_start = _expand((hi - lo + 1).clamp(min=0).long())              # one element per (edge, pixel)
+    # Which pixels each entry visits: up to reach beyond its edge, and the span. When reach is long (the
+    # paper's whole row), those farther than min_step beyond the span go to the row tables, and this pass
+    # stops at `band` = min_step: its ranges reach a little farther (more than rounding), and the exact test
+    # |u_p - u_e| <= band in _nmr_pixels (the tables use its complement) splits the pixels between the two.
+    tables = reach > min_step and reach > ROW_TABLES * n_cols
+    band, margin = (min_step, 0.25) if tables else (reach, 0.0)
+    # (a face no pixel shows, hidden or a back face, uncovers nothing: its entries skip the span)
+    span = shown[f]
+    lo = torch.where(side == 0, torch.ceil(ul - band - margin - 0.5),
+                     torch.where(span, torch.ceil(ul - 0.5), torch.floor(ur - 0.5) + 1)).clamp(min=0)
+    hi = torch.where(side == 1, torch.floor(ur + band + margin - 0.5),
+                     torch.where(span, torch.floor(ur - 0.5), torch.ceil(ul - 0.5) - 1)).clamp(max=n_cols - 1)
+    entries = dict(lo=lo, hi=hi, ul=ul, ur=ur, u_e=u_e, s_e=s_e, side=side, base=base, behind=behind,
+                   colour=colour, c_ok=c_ok, f=f, q_r=q_r, dq=dq, vid_a=vid_a, vid_b=vid_b)
+    out = torch.zeros_like(u)
+    for a, b in _groups((hi - lo + 1).clamp(min=0).long(), CHUNK):          # about CHUNK pixels at a time
+        _nmr_pixels({k: x[a:b] for k, x in entries.items()}, m, out, ortho, min_step, band if tables else None)
+    if tables:
+        _nmr_row_tables(entries, r, m, out, face_values is None, ortho, band, reach, n_rows, n_cols)
+    return out
+
+
+def _nmr_pixels(e, m, out, ortho, min_step, band):
+    """Add to ``out`` (V,) the terms of the pixels the entries ``e`` (a dict of per-entry tensors, a chunk
+    of ``_nmr_scan``'s) visit, one element per (entry, pixel). band: None, or the distance beyond the span
+    past which the row tables take the pixels over."""
+    img, g, face_id, depth_q = m["image"], m["g"], m["face_id"], m["depth_q"]
+    elem, e_start = _expand((e["hi"] - e["lo"] + 1).clamp(min=0).long())   # one element per (entry, pixel)
     take = lambda a: a.index_select(0, elem)                                # noqa: E731  per-entry → per-element
-    col = take(lo) + torch.arange(elem.numel(), device=u.device) - take(e_start)
+    col = take(e["lo"]) + torch.arange(elem.numel(), device=elem.device) - take(e_start)
     up = col + 0.5                                                          # (E,) the pixel centre's u
-    pix = take(base) + col.long()
-    inside = (up >= take(ul)) & (up <= take(ur))
+    pix = take(e["base"]) + col.long()
+    inside = (up >= take(e["ul"])) & (up <= take(e["ur"]))
     here = img.index_select(0, pix)                                         # (E, C)
-    q_p = take(q_r) + take(dq) * up
+    q_p = take(e["q_r"]) + take(e["dq"]) * up
     nearer = (q_p > depth_q.index_select(0, pix)) & (ortho or (q_p > 0))    # q_p <= 0: the plane is behind us
-    dI = torch.where(inside[:, None], take(behind), take(colour)) - here    # (E, C)
-    use = torch.where(inside, face_id.index_select(0, pix) == take(f), nearer & take(c_ok))
+    dI = torch.where(inside[:, None], take(e["behind"]), take(e["colour"])) - here   # (E, C)
+    use = torch.where(inside, face_id.index_select(0, pix) == take(e["f"]), nearer & take(e["c_ok"]))
+    dist = (up - take(e["u_e"])).abs()
+    if band is not None:                                                    # farther out: the row tables'
+        use &= inside | (dist <= band)
     dot = (g.index_select(0, pix) * dI).sum(1) * use                        # δᴾ · δI
     dot = torch.where(dot < 0, dot, 0.0)                                    # the sign rule
-    sd = take(side)
+    sd = take(e["side"])
     direction = torch.where(inside, 1.0 - 2.0 * sd, 2.0 * sd - 1.0)         # which way the vertex moves
-    dist = (up - take(u_e)).abs()
-    out = torch.zeros_like(u)
-    for w, vid in ((s_e, vid_a), (1 - s_e, vid_b)):
+    for w, vid in ((e["s_e"], e["vid_a"]), (1 - e["s_e"], e["vid_b"])):
         # δx = δ / w, floored at min_step: ∂L/∂x = dot / δx = dot · w / (direction · max(|δ|, min_step · w))
         w = take(w)
-        den = torch.maximum(dist, min_step * w).clamp(min=torch.finfo(u.dtype).tiny)
+        den = torch.maximum(dist, min_step * w).clamp(min=torch.finfo(dist.dtype).tiny)
         out.index_add_(0, take(vid), dot * w * direction / den)
-    return out
+
+
+def _nmr_row_tables(e, row, m, out, per_side, ortho, band, reach, n_rows, n_cols):
+    """Add to ``out`` (V,) the covering terms of the pixels farther than ``band`` (>= min_step) beyond each
+    face's span along its rows, and at most ``reach``: what makes the paper's whole-row reach expensive.
+
+    There the floor on δx never applies (|δ| > min_step >= min_step · w), so a pixel's term is
+    ``direction · w · min(0, δᴾ · δI) / |δ|`` and a row's terms sum to ``w`` times one sum per edge: the
+    pixels left of the span feed its left edge, those right of it its right edge. For one image row the
+    faces crossing it and the row's pixels form a table (faces × pixels) of dense arithmetic, no per-pixel
+    indexing: δᴾ · δI = g · colour - g · here is one matrix product, the plane's q one outer product. Only
+    the pixels where the sign rule can keep a term for some face are columns of the table (for a
+    silhouette, the background where ∂L/∂I < 0). e: the entries of ``_nmr_scan``, the first half the
+    left edges and the second half the right edges of the same rows (``row``: each entry's row);
+    per_side: the covering colour differs between the two sides (no face_values)."""
+    n = e["ul"].numel() // 2
+    if n == 0:
+        return
+    img, g = m["image"], m["g"]
+    C = img.shape[1]
+
+    def coefficients(colour, c_ok):                                         # (n, C + 1): [colour, -1], or 0
+        coef = torch.cat([colour, -torch.ones_like(colour[:, :1])], 1)       # where the colour is unknown
+        return torch.where(c_ok[:, None], coef, 0.0)
+    coef_l = coefficients(e["colour"][:n], e["c_ok"][:n])
+    coef_r = coefficients(e["colour"][n:], e["c_ok"][n:]) if per_side else None
+    # the pixels where some face's δᴾ · δI can be < 0: g · c - g · here >= Σ_c min(g_c lo_c, g_c hi_c) - g · here
+    # over the colours' range [lo, hi] per channel; elsewhere (g = 0, or a silhouette's covered pixels) no term
+    known = torch.cat([coef_l, coef_r]) if per_side else coef_l
+    known = known[known[:, -1] != 0, :C]                                    # the colours in use
+    if known.shape[0] == 0:
+        return
+    gi = (g * img).sum(1)                                                   # (P,) g · here
+    bound = torch.minimum(g * known.amin(0), g * known.amax(0)).sum(1) - gi
+    wanted = (bound < 0).view(n_rows, n_cols)
+    rhs_all = torch.cat([g, gi[:, None]], 1).view(n_rows, n_cols, C + 1)    # [g, g · here] per pixel
+    depth = m["depth_q"].view(n_rows, n_cols)
+    if not ortho:
+        depth = depth.clamp(min=0)                                          # q_p > depth and q_p > 0 at once
+    empty = depth == (-math.inf if ortho else 0.0)                          # the background's pixels
+    # A face behind the surface at every covered pixel of its row (a back face of a closed mesh, with
+    # cull_backfaces=False) can only cover background: its table needs the background's columns alone.
+    # Its q along the row is affine, so at most max(q(0), q(n_cols)); compared with the least q shown.
+    row = row[:n].long()
+    least = torch.where(wanted & ~empty, depth, math.inf).amin(1)           # (n_rows,)
+    q_r, dq = e["q_r"][:n], e["dq"][:n]
+    hidden = torch.maximum(q_r, q_r + dq * n_cols) <= least[row]
+    key = 2 * row + hidden                                                  # the row's visible, then hidden
+    order = torch.argsort(key, stable=True)                                 # each row's entries together
+    first = lambda x: x[:n][order]                                          # noqa: E731  left edge (or shared)
+    second = lambda x: x[n:][order]                                         # noqa: E731  right edge
+    ul, ur, q_r, dq, coef_l = first(e["ul"]), first(e["ur"]), q_r[order], dq[order], coef_l[order]
+    coef_r = None if coef_r is None else coef_r[order]
+    # the columns of every row at once, rows after rows: (centre, [g, g · here], q shown), for the rows'
+    # visible faces (wanted pixels) and for their hidden ones (wanted pixels of the background)
+    columns = []
+    for mask in (wanted, wanted & empty):
+        ends = torch.cumsum(mask.sum(1), 0).tolist()
+        columns.append((mask.nonzero()[:, 1].to(ul.dtype) + 0.5, rhs_all[mask], depth[mask], [0] + ends))
+    L, R = torch.zeros_like(ul), torch.zeros_like(ul)                       # per entry: the sums left and right
+    s0 = 0
+    for k, count in enumerate(torch.bincount(key, minlength=2 * n_rows).tolist()):
+        up, rhs, dep, ends = columns[k % 2]
+        c0, c1 = ends[k // 2], ends[k // 2 + 1]                             # this row's columns
+        if count and c1 > c0:
+            step = max(1, CHUNK // (c1 - c0))                               # at most about CHUNK elements
+            for a in range(s0, s0 + count, step):
+                b = min(a + step, s0 + count)
+                L[a:b], R[a:b] = _nmr_table(ul[a:b], ur[a:b], q_r[a:b], dq[a:b], coef_l[a:b],
+                                            None if coef_r is None else coef_r[a:b], up[c0:c1], rhs[c0:c1].T,
+                                            dep[c0:c1], band, reach)
+        s0 += count
+    # the left edge moves -u to cover a pixel on its left, the right edge +u (vertex weights w and 1 - w)
+    w_l, w_r = first(e["s_e"]), second(e["s_e"])
+    for vid, term in ((first(e["vid_a"]), -w_l * L), (first(e["vid_b"]), -(1 - w_l) * L),
+                      (second(e["vid_a"]), w_r * R), (second(e["vid_b"]), (1 - w_r) * R)):
+        out.index_add_(0, vid, term)
+
+
+def _nmr_table(ul, ur, q_r, dq, coef_l, coef_r, up, rhs, dep, band, reach):
+    """One row's table: Σ over the pixels left of each span, and right of it, farther than ``band`` (and at
+    most ``reach``), of ``min(0, δᴾ · δI) / |δ|`` where the face's plane is nearer than the pixel's surface.
+    ul, ur, q_r, dq: (n,) the spans and planes; coef_l, coef_r: (n, C + 1) [colour, -1] (coef_r None: the
+    same colour both sides); up: (p,) the columns' centres; rhs: (C + 1, p) [g, g · here]; dep: (p,)
+    what the pixels show (q). Returns L, R (n,). Masks are applied in place: few passes over the table."""
+    off = torch.addr(q_r[:, None], dq, up) <= dep                           # (n, p) the plane not nearer
+    if reach < math.inf:
+        off |= torch.maximum(ul[:, None] - up, up - ur[:, None]) > reach     # or the pixel out of reach
+    # min(0, δᴾ · δI), the sign rule: δᴾ · δI = g · colour - g · here, one matrix product
+    dot_l = (coef_l @ rhs).clamp_(max=0)
+    dot_r = dot_l if coef_r is None else (coef_r @ rhs).clamp_(max=0)
+    sums = []
+    for dot, dist in ((dot_l, ul[:, None] - up), (dot_r, up - ur[:, None])):   # |δ| left of the span; right
+        skip = (dist <= band) | off                                         # the span, the other side, the band
+        sums.append((dot / dist).masked_fill_(skip, 0.0).sum(1))            # (0/0 where skipped: replaced)
+    return sums
 
 
 def _row_plane(tu, tv, tq, vc):

@@ -435,3 +435,389 @@ def test_bench_soft_rows():
     assert hard["rmse"] == nmr["rmse"] > 0                                  # the same forward image
     assert all(r["fwd_ms"] > 0 and r["fwd_bwd_ms"] > 0 for r in rows)
     assert "soft" in format_table(rows)
+
+
+# --------------------------------------------------------------------- chunked work: the same results
+
+def _soft_grads(mesh, camera, mode, cull, **kw):
+    """The image and the gradients of a fixed loss w.r.t. verts (and the colours in colour mode)."""
+    verts = mesh.verts.clone().requires_grad_()
+    fc = torch.rand(mesh.faces.shape[0], 3, generator=torch.Generator().manual_seed(5),
+                    dtype=torch.float64).requires_grad_()
+    w = torch.randn(camera.height, camera.width, 3, generator=torch.Generator().manual_seed(6), dtype=torch.float64)
+    if mode == "silhouette":
+        img = soft_rasterize(Mesh(verts, mesh.faces), camera, cull_backfaces=cull, **kw)
+        (img * w[..., 0]).sum().backward()
+        return img.detach(), verts.grad, None
+    img = soft_rasterize(Mesh(verts, mesh.faces), camera, mode="color", face_colors=fc, cull_backfaces=cull, **kw)
+    (img * w).sum().backward()
+    return img.detach(), verts.grad, fc.grad
+
+
+@pytest.mark.parametrize("mode", ["silhouette", "color"])
+@pytest.mark.parametrize("cull", [True, False])
+def test_soft_chunks_change_nothing_but_rounding(monkeypatch, mode, cull):
+    """CHUNK bounds the pairs built at once (candidates per group of faces, kept pairs per checkpoint); a tiny
+    CHUNK (hundreds of groups, the survivors pruned many times) gives the same image and gradients as one
+    chunk, which is the unchunked computation."""
+    import course.soft as soft
+    mesh, cam = icosphere(2, dtype=torch.float64), persp(32, eye=(0.3, 0.4, 2.6))
+    kw = dict(sigma=1e-3, gamma=1e-3)
+    monkeypatch.setattr(soft, "CHUNK", 1 << 30)
+    whole = _soft_grads(mesh, cam, mode, cull, **kw)
+    monkeypatch.setattr(soft, "CHUNK", 500)
+    xy, _, _, _ = soft._screen_faces(mesh.verts, mesh.faces, cam, cull)
+    radius = torch.full((xy.shape[0],), 2.0, dtype=torch.float64)
+    assert len(soft._triangle_groups(xy.double(), radius, 32, 32)) > 10    # many groups really
+    chunked = _soft_grads(mesh, cam, mode, cull, **kw)
+    for a, b in zip(whole, chunked):
+        if a is not None:
+            assert torch.allclose(a, b, rtol=1e-12, atol=1e-12 * float(a.abs().max()))
+
+
+def test_color_pairs_keep_exactly_the_pairs_that_matter(monkeypatch):
+    """The pairs kept group by group (against the best weight so far, pruned on the way) are exactly those
+    that pass the threshold against the final per-pixel best, computed here from all candidates at once."""
+    import course.soft as soft
+    mesh, cam = icosphere(2, dtype=torch.float64), persp(32, eye=(0.3, 0.4, 2.6))
+    xy, q, _, _ = soft._screen_faces(mesh.verts, mesh.faces, cam, False)
+    near = soft._nearness(q.double(), cam)
+    gamma, eps, s = 1e-3, 1e-3, 4.0 / (32 * 32 * 1e-3)
+    radius = ((math.log(1e4) + (near.amax(1) - eps).clamp(min=0) / gamma) / s).sqrt()
+    pixel, tri = soft._candidate_pairs(xy.double(), radius, 32, 32)        # every candidate, at once
+    x, b = soft._pair_terms(xy, tri, pixel, 32, s)
+    nt = near[tri]
+    log_w = torch.nn.functional.logsigmoid(x) + (b[0] * nt[:, 0] + b[1] * nt[:, 1] + b[2] * nt[:, 2]) / gamma
+    top = torch.full((32 * 32,), eps / gamma, dtype=torch.float64).scatter_reduce(0, pixel, log_w, "amax")
+    keep = log_w - top[pixel] >= math.log(1e-4)
+    monkeypatch.setattr(soft, "CHUNK", 400)                                 # many groups, pruned on the way
+    got = soft._color_pairs(xy, near, radius, 32, 32, s, gamma, eps, math.log(1e-4))
+    assert torch.equal(got[0], pixel[keep]) and torch.equal(got[1], tri[keep]) and torch.equal(got[2], top)
+    assert keep.sum() < pixel.numel() / 3                                  # most candidates are dropped
+
+
+def _nmr_grads(mesh, camera, *, colour, image_colours=False, **kw):
+    """The gradient w.r.t. verts (and K) of a fixed loss through nmr_rasterize (or nmr_image with vertex colours
+    and no face_values: the covering colour then comes from the image)."""
+    verts = mesh.verts.clone().requires_grad_()
+    K = camera.K.clone().requires_grad_()
+    cam = Camera(K, camera.R, camera.t, camera.width, camera.height, near=camera.near, far=camera.far,
+                 orthographic=camera.orthographic)
+    m = Mesh(verts, mesh.faces)
+    gen = torch.Generator().manual_seed(7)
+    w = torch.randn(camera.height, camera.width, 3, generator=gen, dtype=torch.float64)
+    if image_colours:
+        vc = torch.rand(mesh.verts.shape[0], 3, generator=gen, dtype=torch.float64)
+        frags = rasterize(m, cam, cull_backfaces=kw.get("cull_backfaces", True))
+        from course.raster import interpolate
+        image = torch.where(frags.mask[..., None], interpolate(vc, frags, mesh.faces), torch.zeros(3).double())
+        img = nmr_image(image, m, cam, frags.face_id, background=0.3, **kw)
+        (img * w).sum().backward()
+    elif colour:
+        fc = torch.rand(mesh.faces.shape[0], 3, generator=gen, dtype=torch.float64)
+        (nmr_rasterize(m, cam, face_colors=fc, background=(0.1, 0.2, 0.3), **kw) * w).sum().backward()
+    else:
+        (nmr_rasterize(m, cam, **kw) * w[..., 0]).sum().backward()
+    return verts.grad, K.grad
+
+
+@pytest.mark.parametrize("camera", [persp(40, eye=(0.3, 0.4, 2.6)), "ortho"], ids=["perspective", "orthographic"])
+@pytest.mark.parametrize("kind", ["silhouette", "face colours", "image colours"])
+@pytest.mark.parametrize("cull", [True, False])
+def test_nmr_row_tables_agree_with_the_pixel_by_pixel_rule(monkeypatch, camera, kind, cull):
+    """NMR's backward visits the pixels far beyond a span as per-row tables (ROW_TABLES) and the others pixel
+    by pixel, CHUNK at a time. Forcing every pixel through the pixel-by-pixel rule in one chunk (the
+    unchunked computation) or through tables and tiny chunks gives the same gradients, for reach None and a
+    finite reach the tables clip."""
+    import course.soft as soft
+    if camera == "ortho":
+        camera = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), ortho_height=2.6, width=40, height=40,
+                                dtype=torch.float64)
+    mesh = icosphere(2, dtype=torch.float64)
+    mesh = Mesh(mesh.verts * torch.tensor([1.0, 0.8, 1.1], dtype=torch.float64), mesh.faces)
+    kw = dict(colour=kind == "face colours", image_colours=kind == "image colours", cull_backfaces=cull)
+    for reach in (None, 7.5):
+        monkeypatch.setattr(soft, "CHUNK", 1 << 30)
+        monkeypatch.setattr(soft, "ROW_TABLES", math.inf)                   # never tables: the paper's loop
+        ref = _nmr_grads(mesh, camera, reach=reach, **kw)
+        monkeypatch.setattr(soft, "CHUNK", 300)
+        monkeypatch.setattr(soft, "ROW_TABLES", 0.0)                        # tables whenever reach > min_step
+        got = _nmr_grads(mesh, camera, reach=reach, **kw)
+        for a, b in zip(ref, got):
+            assert a.abs().sum() > 0
+            assert torch.allclose(a, b, rtol=1e-10, atol=1e-12 * float(a.abs().max())), (reach, (a - b).abs().max())
+
+
+def test_nmr_backward_matches_the_rule_on_a_larger_mesh():
+    """With the default settings (reach None: row tables) the gradient equals the pixel-by-pixel rule run
+    through the old code path's settings (no tables, one chunk), on a mesh where faces hide faces."""
+    import course.soft as soft
+    mesh = icosphere(3, dtype=torch.float64)
+    cam = persp(64, eye=(0.5, 0.3, 2.8))
+    default = _nmr_grads(mesh, cam, colour=True, cull_backfaces=False)
+    old = soft.ROW_TABLES, soft.CHUNK
+    try:
+        soft.ROW_TABLES, soft.CHUNK = math.inf, 1 << 30
+        ref = _nmr_grads(mesh, cam, colour=True, cull_backfaces=False)
+    finally:
+        soft.ROW_TABLES, soft.CHUNK = old
+    for a, b in zip(ref, default):
+        assert torch.allclose(a, b, rtol=1e-10, atol=1e-12 * float(a.abs().max()))
+
+
+# ---------------------------------------------------------------------------------- bad input, defined
+
+def _empty_mesh(V, dtype=torch.float64):
+    """A mesh without faces (course.mesh.Mesh refuses one; any object with verts and faces is accepted)."""
+    import types
+    return types.SimpleNamespace(verts=torch.zeros(V, 3, dtype=dtype, requires_grad=True),
+                                 faces=torch.zeros(0, 3, dtype=torch.int64))
+
+
+@pytest.mark.parametrize("V", [0, 3])
+def test_empty_mesh_gives_the_background_and_zero_gradients(V):
+    """No faces (no vertices, or some): the background everywhere, and a backward that runs and gives 0."""
+    cam = persp(8)
+    bg = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
+    renders = [(lambda m: soft_rasterize(m, cam), 0.0),
+               (lambda m: soft_rasterize(m, cam, mode="color", face_colors=torch.zeros(0, 3), background=bg), bg),
+               (lambda m: nmr_rasterize(m, cam), 0.0),
+               (lambda m: nmr_rasterize(m, cam, face_colors=torch.zeros(0, 3), background=bg), bg),
+               (lambda m: nmr_image(torch.full((8, 8, 1), 0.5), m, cam, torch.full((8, 8), -1)), 0.5)]
+    for render, expected in renders:
+        mesh = _empty_mesh(V)
+        img = render(mesh)
+        assert torch.equal(img, torch.as_tensor(expected, dtype=img.dtype).expand_as(img))
+        (img * torch.randn(img.shape, dtype=img.dtype)).sum().backward()
+        assert mesh.verts.grad is None or (mesh.verts.grad == 0).all()
+
+
+def test_integer_colours_are_taken_as_floats():
+    mesh, cam = two_triangles(), persp(12)
+    ints = torch.tensor([[1, 0, 0], [0, 1, 1]])
+    floats = ints.double()
+    for key in ("face_colors",):
+        a = soft_rasterize(mesh, cam, mode="color", gamma=0.1, sigma=1e-3, **{key: ints}, cull_backfaces=False)
+        b = soft_rasterize(mesh, cam, mode="color", gamma=0.1, sigma=1e-3, **{key: floats}, cull_backfaces=False)
+        assert a.dtype == torch.float64 and torch.equal(a, b)
+    a = nmr_rasterize(mesh, cam, face_colors=ints, background=1, cull_backfaces=False)
+    b = nmr_rasterize(mesh, cam, face_colors=floats, background=1.0, cull_backfaces=False)
+    assert a.dtype == torch.float64 and torch.equal(a, b)
+    # float32 colours on a float64 mesh: the image is float64, as soft_rasterize's
+    assert nmr_rasterize(mesh, cam, face_colors=floats.float(), cull_backfaces=False).dtype == torch.float64
+
+
+NAN, INF = float("nan"), float("inf")
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(mode="color", background=(0.1, 0.2)), "background"),
+    (dict(mode="color", background=torch.zeros(1, 3)), "background"),
+    (dict(mode="color", background=(0.1, NAN, 0.2)), "background"),
+    (dict(mode="color", face_colors=torch.full((2, 3), NAN)), "face_colors"),
+    (dict(mode="color", face_colors=torch.zeros(2, 0)), "face_colors"),
+    (dict(mode="color", vertex_colors=torch.full((6, 3), INF)), "vertex_colors"),
+    (dict(sigma=INF), "sigma"), (dict(sigma=True), "sigma"), (dict(sigma="1e-4"), "sigma"),
+    (dict(gamma=INF), "gamma"), (dict(gamma=-1e-4), "gamma"),
+    (dict(threshold=NAN), "threshold"), (dict(threshold="small"), "threshold"),
+    (dict(eps=NAN), "eps"), (dict(eps=-0.1), "eps"),
+    (dict(mode=None), "mode"), (dict(cull_backfaces="no"), "cull_backfaces"),
+])
+def test_soft_rasterize_refuses_bad_input(kw, match):
+    if kw.get("mode") == "color" and "face_colors" not in kw and "vertex_colors" not in kw:
+        kw = dict(kw, face_colors=torch.ones(2, 3))
+    with pytest.raises(ValueError, match=match):
+        soft_rasterize(two_triangles(), persp(8), **kw)
+
+
+def test_colours_that_are_not_numbers_are_a_type_error():
+    with pytest.raises(TypeError, match="face_colors"):                     # as everywhere (course.tensors)
+        soft_rasterize(two_triangles(), persp(8), mode="color", face_colors="red")
+    with pytest.raises(TypeError, match="face_colors"):
+        nmr_rasterize(two_triangles(), persp(8), face_colors="red")
+
+
+def test_soft_rasterize_accepts_numbers_of_any_kind():
+    import numpy as np
+    mesh, cam = two_triangles(), persp(8)
+    ref = soft_rasterize(mesh, cam, sigma=1e-3)
+    for sigma in (np.float32(1e-3), np.float64(1e-3), torch.tensor(1e-3, dtype=torch.float64)):
+        assert torch.allclose(soft_rasterize(mesh, cam, sigma=sigma), ref, rtol=1e-6)
+    img = soft_rasterize(mesh, cam, mode="color", face_colors=torch.ones(2, 3), background=torch.tensor([0.5]))
+    assert img.shape == (8, 8, 3)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(face_colors=torch.full((2, 3), NAN)), "face_colors"),
+    (dict(face_colors=torch.ones(2, 3), background=(0.0, 1.0)), "background"),
+    (dict(face_colors=torch.ones(2, 3), background=(0.0, NAN, 1.0)), "background"),
+    (dict(background=(0.0, 1.0, 0.0)), "background"),                      # a silhouette has one channel
+    (dict(min_step="0.5"), "min_step"), (dict(min_step=True), "min_step"), (dict(min_step=NAN), "min_step"),
+    (dict(min_step=-1.0), "min_step"),
+    (dict(reach="all"), "reach"), (dict(reach=False), "reach"), (dict(reach=-1.0), "reach"),
+    (dict(reach=NAN), "reach"), (dict(cull_backfaces="no"), "cull_backfaces"),
+])
+def test_nmr_rasterize_refuses_bad_input(kw, match):
+    with pytest.raises(ValueError, match=match):
+        nmr_rasterize(two_triangles(), persp(8), **kw)
+
+
+def test_nmr_reach_may_be_infinite():
+    mesh, cam = two_triangles(), persp(12)
+    d = torch.randn(12, 12, generator=torch.Generator().manual_seed(8), dtype=torch.float64)
+    assert torch.equal(_nmr_grad(mesh, cam, d, reach=None)[1], _nmr_grad(mesh, cam, d, reach=math.inf)[1])
+
+
+def test_nmr_image_refuses_bad_input():
+    mesh, cam = two_triangles(), persp(8)
+    frags = rasterize(mesh, cam)
+    image = torch.rand(8, 8, 3, dtype=torch.float64)
+    fid = frags.face_id
+    cases = [
+        (dict(image=image[..., :0]), ValueError, "image"),
+        (dict(image=image[..., 0]), ValueError, "image"),
+        (dict(image=torch.full((8, 8, 3), NAN)), ValueError, "image"),
+        (dict(face_id=fid.double()), TypeError, "face_id"),
+        (dict(face_id=fid.bool()), TypeError, "face_id"),
+        (dict(face_id=fid[:, :7]), ValueError, "face_id"),
+        (dict(face_id=torch.full((8, 8), 2)), ValueError, "face_id"),      # the mesh has 2 faces
+        (dict(face_id=torch.full((8, 8), -2)), ValueError, "face_id"),
+        (dict(face_values=torch.ones(2, 1)), ValueError, "face_values"),   # one channel for an RGB image
+        (dict(face_values=torch.full((2, 3), NAN)), ValueError, "face_values"),
+        (dict(background=(0.0, 1.0)), ValueError, "background"),
+        (dict(background=INF), ValueError, "background"),
+        (dict(reach="far"), ValueError, "reach"), (dict(min_step=0), ValueError, "min_step"),
+    ]
+    for kw, error, match in cases:
+        args = dict(image=image, face_id=fid)
+        args.update(kw)
+        image_, face_id = args.pop("image"), args.pop("face_id")
+        with pytest.raises(error, match=match):
+            nmr_image(image_, mesh, cam, face_id, **args)
+    # numpy face ids and int32 ids are indices too
+    out = nmr_image(image, mesh, cam, fid.numpy().astype("int32"))
+    assert torch.equal(out, image)
+
+
+def _nmr_rule_by_loops(mesh, camera, image, face_id, g, face_values, bg, reach=math.inf, min_step=0.5):
+    """NMR's rule (module docstring, ``_nmr_scan``) written as plain loops over faces, rows and pixels: the
+    gradient (V, 2) w.r.t. the screen positions. Slow; tiny scenes only. No faces cross the near plane."""
+    H, W = camera.height, camera.width
+    xy, depth = camera.project(mesh.verts.detach())
+    q = (1 / depth).tolist()
+    uv = xy.tolist()
+    faces = mesh.faces.tolist()
+    fid = face_id.tolist()
+    qmap = [[-math.inf] * W for _ in range(H)]                             # q of the visible surface
+    for i in range(H):
+        for j in range(W):
+            if fid[i][j] >= 0:
+                (x0, y0), (x1, y1), (x2, y2) = (uv[k] for k in faces[fid[i][j]])
+                area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+                px, py = j + 0.5, i + 0.5
+                b1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / area
+                b2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / area
+                qmap[i][j] = sum(b * q[k] for b, k in zip((1 - b1 - b2, b1, b2), faces[fid[i][j]]))
+    out = [[0.0, 0.0] for _ in uv]
+    for axis in (0, 1):                                                    # rows give x, columns give y
+        n_rows, n_cols = (H, W) if axis == 0 else (W, H)
+        at = (lambda a, r, c: a[r][c]) if axis == 0 else (lambda a, r, c: a[c][r])   # noqa: E731
+        for f, face in enumerate(faces):
+            u = [uv[k][axis] for k in face]
+            v = [uv[k][1 - axis] for k in face]
+            for r in range(n_rows):
+                vc = r + 0.5
+                cross = []                                                 # (u at the crossing, s_a, a, b)
+                for k in range(3):
+                    va, vb = v[k], v[(k + 1) % 3]
+                    if min(va, vb) <= vc < max(va, vb):
+                        s = (vc - vb) / (va - vb)
+                        cross.append((u[(k + 1) % 3] + s * (u[k] - u[(k + 1) % 3]), s, face[k], face[(k + 1) % 3]))
+                if len(cross) != 2:
+                    continue
+                left, right = sorted(cross, key=lambda c: c[0])
+                ul, ur = left[0], right[0]
+                # the face's q along the row: the plane through its corners
+                (a0, b0), (a1, b1), (a2, b2) = ((u[k], v[k]) for k in range(3))
+                det = (a1 - a0) * (b2 - b0) - (b1 - b0) * (a2 - a0)
+                dqa = ((q[face[1]] - q[face[0]]) * (b2 - b0) - (q[face[2]] - q[face[0]]) * (b1 - b0)) / det
+                dqb = ((q[face[2]] - q[face[0]]) * (a1 - a0) - (q[face[1]] - q[face[0]]) * (a2 - a0)) / det
+                for c in range(n_cols):
+                    up = c + 0.5
+                    here = at(image, r, c)
+                    grad = at(g, r, c)
+                    terms = []                                             # (side's crossing, dI, direction)
+                    if ul <= up <= ur:                                     # uncovering: either edge
+                        if at(fid, r, c) != f:
+                            continue
+                        for side, (ue, *_rest), step in ((0, left, -1), (1, right, 1)):
+                            across = (math.ceil(ue - 0.5) - 1) if side == 0 else (math.floor(ue - 0.5) + 1)
+                            behind = at(image, r, across) if 0 <= across < n_cols else bg
+                            terms.append((side, [x - y for x, y in zip(behind, here)], 1 - 2 * side))
+                    else:                                                  # covering: the nearer edge
+                        side = 0 if up < ul else 1
+                        ue = (left if side == 0 else right)[0]
+                        if abs(up - ue) > reach:
+                            continue
+                        qp = q[face[0]] + dqa * (up - a0) + dqb * (vc - b0)
+                        if not (qp > at(qmap, r, c) and qp > 0):
+                            continue
+                        if face_values is not None:
+                            colour = face_values[f]
+                        else:
+                            near_px = math.ceil(ue - 0.5) if side == 0 else math.floor(ue - 0.5)
+                            near_px = min(max(near_px, 0), n_cols - 1)
+                            if at(fid, r, near_px) != f:
+                                continue
+                            colour = at(image, r, near_px)
+                        terms.append((side, [x - y for x, y in zip(colour, here)], 2 * side - 1))
+                    for side, dI, direction in terms:
+                        ue, s, va_, vb_ = left if side == 0 else right
+                        dot = sum(x * y for x, y in zip(grad, dI))
+                        if dot >= 0:
+                            continue
+                        for w, vid in ((s, va_), (1 - s, vb_)):
+                            out[vid][axis] += dot * w * direction / max(abs(up - ue), min_step * w, 1e-300)
+    return torch.tensor(out, dtype=torch.float64)
+
+
+@pytest.mark.parametrize("with_face_values", [True, False])
+@pytest.mark.parametrize("tables", [True, False])
+@pytest.mark.parametrize("reach", [None, 2.5])
+def test_nmr_matches_the_rule_written_as_loops(monkeypatch, with_face_values, tables, reach):
+    """An oracle: NMR's rule as plain loops, on six triangles at 14 × 11 (not square) that overlap, cross the
+    image border on both sides, hide behind another or lie off the image, against nmr_image's gradient (row
+    tables or pixel by pixel, tiny chunks)."""
+    import course.soft as soft
+    monkeypatch.setattr(soft, "CHUNK", 40)
+    monkeypatch.setattr(soft, "ROW_TABLES", 0.0 if tables else math.inf)
+    cam = Camera.look_at((0.1, 0.2, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=14, height=11, near=0.5, far=10.0,
+                         dtype=torch.float64)
+    verts = torch.tensor([[-1.6, -0.5, 0.0], [0.3, -0.7, 0.2], [-0.2, 0.6, -0.1],          # crosses the left
+                          [-0.3, -0.2, 0.6], [1.9, 0.1, 0.5], [0.2, 0.75, 0.55],           # nearer, crosses right
+                          [-0.6, 0.1, -0.4], [0.6, -0.5, -0.5], [0.5, 0.8, -0.45],         # behind both
+                          [-0.2, -0.15, 0.5], [1.6, 0.1, 0.45], [0.2, 0.6, 0.48],          # hidden, crosses right
+                          [1.5, -0.3, 0.0], [2.2, -0.2, 0.0], [1.7, 0.4, 0.1],             # off the image, right
+                          [-2.2, -0.3, 0.0], [-1.5, -0.2, 0.0], [-1.7, 0.4, 0.1]],         # and left
+                         dtype=torch.float64)
+    mesh = Mesh(verts, [[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11], [12, 13, 14], [15, 16, 17]])
+    frags = rasterize(mesh, cam)
+    gen = torch.Generator().manual_seed(9)
+    assert (frags.face_id == 2).sum() > 0 and (frags.face_id >= 3).sum() == 0   # the last three never show
+    fv = torch.rand(6, 3, generator=gen, dtype=torch.float64)
+    bg = [0.3, 0.1, 0.6]
+    image = torch.where(frags.mask[..., None], fv[frags.face_id.clamp(min=0)], torch.tensor(bg, dtype=torch.float64))
+    g = torch.randn(11, 14, 3, generator=gen, dtype=torch.float64)
+    expected = _nmr_rule_by_loops(mesh, cam, image.tolist(), frags.face_id, g.tolist(),
+                                  fv.tolist() if with_face_values else None, bg,
+                                  reach=math.inf if reach is None else reach)
+    screen = mesh.verts.clone().requires_grad_()
+    out = nmr_image(image, Mesh(screen, mesh.faces), cam, frags.face_id, face_values=fv if with_face_values else None,
+                    background=bg, cull_backfaces=False, reach=reach)
+    out.backward(g)
+    # the same verts gradient, from the oracle's screen gradient through the projection
+    v = mesh.verts.clone().requires_grad_()
+    xy, _ = cam.project(v)
+    (xy * expected).sum().backward()
+    assert expected.abs().sum() > 0 and (expected[:, 0] != 0).any() and (expected[:, 1] != 0).any()
+    assert torch.allclose(screen.grad, v.grad, rtol=1e-10, atol=1e-10)
