@@ -37,7 +37,8 @@ from .render import RenderResult, RenderSettings, Scene
 from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blinn_phong, lambert, linear_to_srgb,
                       phong, sample_texture, srgb_to_linear)
 from .shadows import SpotLight, shadow_factor, shadow_map
-from .soft import nmr_image, nmr_rasterize, soft_rasterize
+from .nmr import nmr_image, nmr_rasterize
+from .soft import soft_rasterize
 from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
 from .fit import fit_camera, fit_mesh_from_silhouettes
 from .fit_texture import fit_texture_from_images, fit_vertex_colors_from_images

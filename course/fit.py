@@ -50,7 +50,8 @@ from . import losses, models
 from .camera import Camera, axis_angle_to_matrix
 from .mesh import Mesh
 from .raster import rasterize
-from .soft import nmr_rasterize, soft_rasterize
+from .nmr import nmr_rasterize
+from .soft import soft_rasterize
 from .tensors import _check_count, _check_real, _check_shape, as_tensor
 
 __all__ = ["FitHistory", "SilhouetteFit", "CameraFit", "circle_views", "sphere_views", "hard_silhouettes",

@@ -49,7 +49,8 @@ from course.shading import (
     wireframe_overlay,
 )
 from course.shadows import shadow_factor, shadow_map
-from course.soft import nmr_image, soft_rasterize
+from course.nmr import nmr_image
+from course.soft import soft_rasterize
 from course.tensors import _check_count, _check_flag, _check_real, as_tensor
 
 __all__ = ["Scene", "RenderSettings", "RenderResult", "render", "plan_passes", "frame_camera",

@@ -120,7 +120,7 @@ def test_camera_fit_reproducible():
 def test_camera_fit_color_and_nmr_run():
     mesh, ref_cam, start, _ = _camera_problem(size=24)
     colors = (mesh.face_normals().detach() + 1) / 2                          # (F, 3) in [0, 1]
-    from course.soft import nmr_rasterize
+    from course.nmr import nmr_rasterize
     ref = nmr_rasterize(mesh, ref_cam, face_colors=colors).detach()
     for method in ("soft", "nmr"):
         r = fit_camera(mesh, ref, start, steps=2, method=method, face_colors=colors, progress=False,

@@ -9,7 +9,8 @@ from course.camera import Camera
 from course.mesh import Mesh
 from course.models import icosphere
 from course.raster import rasterize
-from course.soft import nmr_image, nmr_rasterize, soft_rasterize
+from course.nmr import nmr_image, nmr_rasterize
+from course.soft import soft_rasterize
 
 
 def ortho8(width=8, height=8, dtype=torch.float64):
@@ -529,7 +530,7 @@ def test_nmr_row_tables_agree_with_the_pixel_by_pixel_rule(monkeypatch, camera, 
     by pixel, CHUNK at a time. Forcing every pixel through the pixel-by-pixel rule in one chunk (the
     unchunked computation) or through tables and tiny chunks gives the same gradients, for reach None and a
     finite reach the tables clip."""
-    import course.soft as soft
+    import course.nmr as nmr
     if camera == "ortho":
         camera = Camera.look_at((0.3, 0.4, 3.0), (0.0, 0.0, 0.0), ortho_height=2.6, width=40, height=40,
                                 dtype=torch.float64)
@@ -537,11 +538,11 @@ def test_nmr_row_tables_agree_with_the_pixel_by_pixel_rule(monkeypatch, camera, 
     mesh = Mesh(mesh.verts * torch.tensor([1.0, 0.8, 1.1], dtype=torch.float64), mesh.faces)
     kw = dict(colour=kind == "face colours", image_colours=kind == "image colours", cull_backfaces=cull)
     for reach in (None, 7.5):
-        monkeypatch.setattr(soft, "CHUNK", 1 << 30)
-        monkeypatch.setattr(soft, "ROW_TABLES", math.inf)                   # never tables: the paper's loop
+        monkeypatch.setattr(nmr, "CHUNK", 1 << 30)
+        monkeypatch.setattr(nmr, "ROW_TABLES", math.inf)                   # never tables: the paper's loop
         ref = _nmr_grads(mesh, camera, reach=reach, **kw)
-        monkeypatch.setattr(soft, "CHUNK", 300)
-        monkeypatch.setattr(soft, "ROW_TABLES", 0.0)                        # tables whenever reach > min_step
+        monkeypatch.setattr(nmr, "CHUNK", 300)
+        monkeypatch.setattr(nmr, "ROW_TABLES", 0.0)                        # tables whenever reach > min_step
         got = _nmr_grads(mesh, camera, reach=reach, **kw)
         for a, b in zip(ref, got):
             assert a.abs().sum() > 0
@@ -551,16 +552,16 @@ def test_nmr_row_tables_agree_with_the_pixel_by_pixel_rule(monkeypatch, camera, 
 def test_nmr_backward_matches_the_rule_on_a_larger_mesh():
     """With the default settings (reach None: row tables) the gradient equals the pixel-by-pixel rule run
     through the old code path's settings (no tables, one chunk), on a mesh where faces hide faces."""
-    import course.soft as soft
+    import course.nmr as nmr
     mesh = icosphere(3, dtype=torch.float64)
     cam = persp(64, eye=(0.5, 0.3, 2.8))
     default = _nmr_grads(mesh, cam, colour=True, cull_backfaces=False)
-    old = soft.ROW_TABLES, soft.CHUNK
+    old = nmr.ROW_TABLES, nmr.CHUNK
     try:
-        soft.ROW_TABLES, soft.CHUNK = math.inf, 1 << 30
+        nmr.ROW_TABLES, nmr.CHUNK = math.inf, 1 << 30
         ref = _nmr_grads(mesh, cam, colour=True, cull_backfaces=False)
     finally:
-        soft.ROW_TABLES, soft.CHUNK = old
+        nmr.ROW_TABLES, nmr.CHUNK = old
     for a, b in zip(ref, default):
         assert torch.allclose(a, b, rtol=1e-10, atol=1e-12 * float(a.abs().max()))
 
@@ -788,9 +789,9 @@ def test_nmr_matches_the_rule_written_as_loops(monkeypatch, with_face_values, ta
     """An oracle: NMR's rule as plain loops, on six triangles at 14 × 11 (not square) that overlap, cross the
     image border on both sides, hide behind another or lie off the image, against nmr_image's gradient (row
     tables or pixel by pixel, tiny chunks)."""
-    import course.soft as soft
-    monkeypatch.setattr(soft, "CHUNK", 40)
-    monkeypatch.setattr(soft, "ROW_TABLES", 0.0 if tables else math.inf)
+    import course.nmr as nmr
+    monkeypatch.setattr(nmr, "CHUNK", 40)
+    monkeypatch.setattr(nmr, "ROW_TABLES", 0.0 if tables else math.inf)
     cam = Camera.look_at((0.1, 0.2, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=14, height=11, near=0.5, far=10.0,
                          dtype=torch.float64)
     verts = torch.tensor([[-1.6, -0.5, 0.0], [0.3, -0.7, 0.2], [-0.2, 0.6, -0.1],          # crosses the left

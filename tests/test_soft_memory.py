@@ -10,11 +10,13 @@ import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
 
+import course.nmr as nmr
 import course.soft as soft
 from course.camera import Camera
 from course.mesh import Mesh
 from course.models import icosphere
-from course.soft import nmr_rasterize, soft_rasterize
+from course.nmr import nmr_rasterize
+from course.soft import soft_rasterize
 
 
 class LargestTensor(TorchDispatchMode):
@@ -76,7 +78,7 @@ def test_soft_rasterize_never_holds_all_candidates(monkeypatch, cull):
 @pytest.mark.parametrize("cull", [True, False])
 def test_nmr_backward_never_holds_all_its_terms(monkeypatch, cull):
     mesh, cam = scene()
-    monkeypatch.setattr(soft, "CHUNK", 2048)
+    monkeypatch.setattr(nmr, "CHUNK", 2048)
     for colours in (None, torch.rand(1280, 3, dtype=torch.float64)):
         largest = largest_tensor(lambda m, c: nmr_rasterize(m, c, face_colors=colours, cull_backfaces=cull),
                                  mesh, cam)

@@ -25,7 +25,8 @@ from ..camera import Camera
 from ..coverage import exact_coverage
 from ..mesh import Mesh
 from ..raster import rasterize
-from ..soft import nmr_rasterize, soft_rasterize
+from ..nmr import nmr_rasterize
+from ..soft import soft_rasterize
 from .raster import scene
 from .timing import time_side_by_side
 
