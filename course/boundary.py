@@ -13,11 +13,18 @@ faces share is found from both (each sees the other outside): each counts half. 
 from the face in front only (the one behind is not visible inside its edge), an occluding edge from the
 occluder only, and an edge whose face is hidden on both sides adds nothing. Visibility along an edge changes
 only where another edge or an intersection line crosses it, so the pieces are cut there and one quadrature
-point per piece decides. Lines where two faces pass through each other (``antialias._intersecting_faces``)
-are boundaries too: there the line n_f = n_g (the faces' nearness planes on screen) moves at
-``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The far plane is not a boundary here (faces are taken whole up to it).
+point per piece decides; a piece some face hides entirely needs no cut (``_hidden_pieces``). Lines where two
+faces pass through each other are boundaries too: the segment f ∩ g in 3D (``_intersection_segments``: f's
+chord on g's plane overlapped with g's chord on f's plane, faces sharing one vertex included: a fold through
+itself), cut at the near plane and projected; there the line n_f = n_g (the faces' nearness planes on screen)
+moves at ``∂(n_f - n_g)/∂π / |∇(n_f - n_g)|``. The near plane cuts faces: an edge cut there keeps the ids of
+its welded edge at its new end (``_corner_ids``), so the faces sharing it still find it once. The far plane is
+not a boundary here (faces are taken whole up to it).
 Vertices count as one where their positions agree to 1e-9 of the mesh's size (``_weld``): seam copies of a
 point evaluated twice (the teapot's poles) differ in the last bits, and must not look like an open crack.
+Everything here runs in float64, whatever the problem's dtype (``boundary_gradient``).
+A piece of edge exactly on a pixel border belongs to the pixel its midpoint falls in, the one to the right or
+below (the half-open pixels [j, j+1)): the same one-sided derivative ``exact`` returns there.
 """
 from __future__ import annotations
 

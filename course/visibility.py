@@ -29,7 +29,7 @@ The methods (``method=``), each a function of this module:
   ``samples`` random points on the edges, chosen with probability proportional to their length. Unbiased;
   its variance falls as 1 / samples.
 * ``"nmr"`` and ``"soft"``: the gradients of lecture 08, of a different image (the hard one, or a blurred
-  one): ``soft.nmr_rasterize`` and ``soft.soft_rasterize``. They are here to be compared, not because they
+  one): ``nmr.nmr_rasterize`` and ``soft.soft_rasterize``. They are here to be compared, not because they
   estimate this derivative.
 
 Two image models (``model=``): ``"flat"``, one colour per face (``coverage.exact_coverage``: everything is
@@ -37,6 +37,25 @@ boundary), and ``"affine"``, vertex colours interpolated affinely on screen (``c
 piece's area times the colour at its centroid). With affine colours the interior term is autograd under
 fixed pieces (``boundary._interior``), and the boundary integrand is the product of two linear functions along a
 piece: exact with ``order=2``, not with 1.
+
+What "equal" covers. ``exact``, ``reynolds`` (and the mean of ``edge_sampling``) compute the same number,
+to rounding (about 1e-12 relative in float64), on every scene the tests know: meshes closed or open, faces
+that pass through each other (the crossing ending on an open boundary, at a corner, or through a shared
+vertex), faces clipped by the near plane, seams, and scenes with kinks: where a line of the scene lies exactly
+on a pixel border or a vertex on a pixel corner, each pixel's derivative depends on the direction of the
+motion, and every method returns the one-sided derivative for the scene moving a hair toward +x, +y on screen
+(the half-open pixels [j, j+1) of the conventions). ``finite_differences`` agree with them where the image is
+differentiable, to their own error (about 1e-9 relative at step 1e-5 in float64); at a kink central
+differences return the average of the two sides. A float32 problem gets the float64 answer of its float32
+numbers from the boundary methods; ``exact`` cuts its pieces in float32 (about 1e-6 relative). They are not
+equal where faces become exactly coplanar or edge-on (the derivative there is the arrangement's, one side's),
+nor is ``rasterize``'s z-buffer the same on surfaces closer than float32 resolves (its docstring).
+
+The gradient of a position. Meshes store some positions twice (a seam: one vertex per uv or normal), and
+moving one copy alone opens a crack, a motion no surface makes. ``image_gradient`` treats the copies of a
+position (equal to 1e-9 of the mesh's size, ``boundary._weld``) as one point: each copy's entry is the
+derivative of moving the point, all its copies together, by every method (finite differences move them all).
+An optimiser that steps along it keeps the copies together.
 
 The boundary machinery (the edges on screen, their visible pieces, the z-buffer asked beside them, the
 interior term of affine colours) lives in ``course.boundary``; this module is the front door and the
@@ -54,13 +73,25 @@ from .camera import Camera
 from .coverage import _region_chunks, exact_coverage
 from .coverage_affine import _Field, exact_affine_coverage, polygon_centroids
 from .raster import _check_inputs, interpolate, rasterize
-from .soft import nmr_image, nmr_rasterize, soft_rasterize
-from .tensors import as_tensor
+from .nmr import nmr_image, nmr_rasterize
+from .soft import soft_rasterize
+from .tensors import _check_count, as_tensor
 
 __all__ = ["image_gradient", "METHODS", "PARAMETERS", "boundary_points", "boundary_gradient"]
 
 METHODS = ("exact", "finite_differences", "edge_sampling", "reynolds", "nmr", "soft")
 PARAMETERS = ("verts", "R", "t", "focal", "colors")
+OPTIONS = {"exact": (), "finite_differences": ("step", "scheme", "vertices"), "reynolds": ("order",),
+           "edge_sampling": ("samples", "seed", "generator"), "nmr": ("reach",),
+           "soft": ("sigma", "gamma", "threshold")}                         # the options of each method
+
+
+def _count(x, name, most, minimum=1):
+    """x as an int >= minimum (and <= most): ``tensors._check_count``, with an upper bound."""
+    x = _check_count(x, name, minimum=minimum)
+    if most is not None and x > most:
+        raise ValueError(f"{name} must be an integer between {minimum} and {most}, got {x}")
+    return x
 
 
 # ------------------------------------------------------------------------------------ parameters
@@ -215,8 +246,11 @@ def fd_gradient(prob: _Problem, names, step=1e-4, scheme="central", vertices=Non
     """Finite differences of L, one parameter entry at a time, in the problem's dtype (see module docstring)."""
     if scheme not in ("central", "forward"):
         raise ValueError(f"scheme must be 'central' or 'forward', got {scheme!r}")
-    if not step > 0:
-        raise ValueError(f"step must be positive, got {step!r}")
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not (0 < step < math.inf):
+        raise ValueError(f"step must be a positive finite number, got {step!r}")
+    if vertices is not None:                                                # a list of vertex indices
+        listed = vertices.reshape(-1).tolist() if torch.is_tensor(vertices) else np.asarray(vertices).reshape(-1).tolist()
+        vertices = [_count(i, "vertices (each entry, a vertex index)", None, minimum=0) for i in listed]
     out = []
     with torch.no_grad():
         base = prob.leaves(())
@@ -276,34 +310,45 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     face colours (``model="flat"``); weights: (H, W, 3); background: (3,). method: one of ``METHODS`` (module
     docstring). wrt: None for d L / d mesh.verts, (V, 3); or a sequence of ``PARAMETERS`` names ("verts", "R",
     "t", "focal" (K[0, 0], with K[1, 1] scaled along), "colors"), and a tuple comes back in that order.
+    Copies of one position (a seam) get the same entry, the derivative of moving them all (module docstring).
     options: ``dtype`` (every method; default promote(verts, camera)); finite_differences: ``step`` (1e-4),
     ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
     reynolds: ``order`` (Gauss points per pixel piece of edge, 1); edge_sampling: ``samples`` (1000),
     ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma`` (1e-4), ``threshold``; nmr: ``reach``.
     """
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if isinstance(wrt, str):
+        raise ValueError(f"wrt must be a sequence of names such as ('verts', 't'), got the string {wrt!r}")
     names = ("verts",) if wrt is None else tuple(wrt)
-    bad = [n for n in names if n not in PARAMETERS]
-    if bad or not names:
-        raise ValueError(f"wrt must name some of {', '.join(PARAMETERS)}, got {wrt!r}")
+    bad = [n for n in names if not isinstance(n, str) or n not in PARAMETERS]
+    if bad or not names or len(set(names)) != len(names):
+        raise ValueError(f"wrt must name some of {', '.join(PARAMETERS)}, each once, got {wrt!r}")
+    unknown = sorted(set(options) - {"dtype"} - set(OPTIONS[method]))
+    if unknown:
+        allowed = ", ".join(("dtype",) + OPTIONS[method])
+        raise TypeError(f"unexpected options for method={method!r}: {', '.join(unknown)} (it takes {allowed})")
     dtype = options.pop("dtype", None)
+    if dtype is not None and not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise ValueError(f"dtype must be a floating torch.dtype such as torch.float32 or torch.float64, got {dtype!r}")
     prob = _Problem(mesh, camera, colors, weights, background, model, dtype)
     if method == "exact":
-        grads = exact_gradient(prob, names, **options)
+        grads = exact_gradient(prob, names)
     elif method == "finite_differences":
         grads = fd_gradient(prob, names, **options)
     elif method in ("reynolds", "edge_sampling"):
         geo = [n for n in names if n != "colors"]
         if method == "reynolds":
-            g = boundary_gradient(prob, geo, order=options.pop("order", 1))
+            g = boundary_gradient(prob, geo, order=_count(options.pop("order", 1), "order", 64))
         else:
             generator = options.pop("generator", None)
+            seed = options.pop("seed", 0)
             if generator is None:
-                generator = torch.Generator().manual_seed(int(options.pop("seed", 0)))
-            g = boundary_gradient(prob, geo, samples=options.pop("samples", 1000), generator=generator)
-        if options:
-            raise TypeError(f"unexpected options for {method}: {', '.join(options)}")
+                generator = torch.Generator().manual_seed(_count(seed, "seed", None, minimum=0))
+            elif not isinstance(generator, torch.Generator):
+                raise ValueError(f"generator must be a torch.Generator, got {type(generator).__name__}")
+            g = boundary_gradient(prob, geo, samples=_count(options.pop("samples", 1000), "samples", None),
+                                  generator=generator)
         by_name = dict(zip(geo, g))
         if "colors" in names:                                               # linear: the exact derivative
             by_name["colors"] = exact_gradient(prob, ("colors",))[0]        # (the interior term, exactly)
