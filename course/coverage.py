@@ -204,8 +204,11 @@ def _clip_rows(poly, count, s, inside=None, tol=0.0, on=None, lines=None, line=N
     denom = s - s.gather(1, nxt)
     denom = torch.where(cross_at & (denom != 0), denom, torch.ones_like(denom))   # guarded: no 0/0, even unused
     t = torch.where(cross_at, s / denom, torch.zeros_like(s))
-    t = t + (t.detach().clamp(0, 1) - t.detach())                           # kept on the edge, derivative kept:
-    # at a tie (a vertex on the line) rounding can put t a hair outside [0, 1]; clamp's derivative would be 0
+    # kept on the edge: at a tie (a vertex on the line) rounding can put t a hair outside [0, 1], and clamp's
+    # derivative would be 0 where the crossing does move; far outside, the values disagree with the decisions
+    # (a float32 piece decided in float64) and t's derivative means nothing: clamped
+    near = (t.detach() > -0.5) & (t.detach() < 1.5)
+    t = torch.where(near, t + (t.detach().clamp(0, 1) - t.detach()), t.clamp(0, 1))
     hit = poly + t[..., None] * (_take(poly, nxt) - poly)                   # (N, M, D) crossings
     cand = torch.stack([poly, hit], 2).reshape(N, 2 * M, D)
     emit = torch.stack([keep, cross], 2).reshape(N, 2 * M)

@@ -158,7 +158,7 @@ class _Problem:
 
     def camera(self, p, crop=None):
         """The camera of the parameters p; ``crop`` (x0, y0, w, h) keeps only those pixels."""
-        K0 = self.camera0.K.detach().to(self.dtype)
+        K0 = self.camera0.K.detach().to(p["focal"].dtype)                  # the parameters' dtype (float64 in boundary)
         scale = p["focal"] / K0[0, 0]                                       # fx and fy scale together
         K = torch.cat([K0[:2] * scale, K0[2:]])
         W, H = self.camera0.width, self.camera0.height

@@ -259,3 +259,37 @@ def test_bad_inputs_are_named():
     with pytest.raises(TypeError, match="unexpected"):
         image_gradient(mesh, cam, colors, weights, method="reynolds", samples=10)
     assert PARAMETERS == ALL
+
+
+@pytest.mark.parametrize("options, match", [
+    (dict(method="reynolds", order=2.5), "order must be a positive integer"),  # was taken as 2
+    (dict(method="reynolds", order=0), "order"), (dict(method="reynolds", order=-2), "order"),
+    (dict(method="reynolds", order=True), "order"),
+    (dict(method="exact", dtype="float"), "dtype"),                         # was a RuntimeError about devices
+    (dict(method="exact", dtype=torch.int64), "dtype"),
+    (dict(method="edge_sampling", samples=10.0), "samples"), (dict(method="edge_sampling", samples=0), "samples"),
+    (dict(method="edge_sampling", seed="a"), "seed"), (dict(method="edge_sampling", generator=3), "generator"),
+    (dict(method="finite_differences", step=0.0), "step"), (dict(method="finite_differences", step="1e-3"), "step"),
+    (dict(method="finite_differences", vertices=[1.5]), "vertices"),
+    (dict(method="exact", wrt="verts"), "wrt"), (dict(method="exact", wrt=("verts", "verts")), "wrt"),
+    (dict(method=3), "method"),
+])
+def test_bad_options_are_refused_by_name(options, match):
+    mesh, cam, colors, weights = problem(size=(8, 8))
+    with pytest.raises((ValueError, TypeError), match=match):
+        image_gradient(mesh, cam, colors, weights, **options)
+
+
+@pytest.mark.parametrize("method", ["exact", "finite_differences", "reynolds", "edge_sampling", "nmr", "soft"])
+def test_a_mesh_without_faces_has_zero_gradient(method):
+    """Nothing drawn, nothing to move: every method returns zeros of the right shapes (NMR used to raise an
+    IndexError)."""
+
+    class NoFaces:
+        verts = torch.zeros(3, 3, dtype=torch.float64)
+        faces = torch.zeros(0, 3, dtype=torch.int64)
+
+    cam = Camera.look_at((0.3, 0.2, 3.0), (0.0, 0.0, 0.0), fov_y=40, width=8, height=8, dtype=torch.float64)
+    grads = image_gradient(NoFaces(), cam, torch.zeros(0, 3), torch.ones(8, 8, 3), method=method, wrt=("verts", "t"))
+    assert [tuple(g.shape) for g in grads] == [(3, 3), (3,)]
+    assert all(float(g.abs().sum()) == 0 for g in grads)
