@@ -33,7 +33,7 @@ import math
 import numpy as np
 import torch
 
-from .antialias import _intersecting_faces
+from .discontinuities import _intersecting_faces
 from .coverage import _region_chunks
 from .coverage_affine import _Field, polygon_centroids
 from .raster import _camera_space, _project, _screen_triangles
@@ -177,7 +177,7 @@ def _planes(verts_cam, faces, K, orthographic):
 
 def _with_crossings(edges, prob, p, weld):
     """Append the lines where two faces pass through each other: for each pair (f, g) that may cross
-    (``antialias._intersecting_faces``, pairs sharing one vertex included: a fold through itself), the segment
+    (``discontinuities._intersecting_faces``, pairs sharing one vertex included: a fold through itself), the segment
     f ∩ g in 3D (``_intersection_segments``), cut at the near plane and projected. The image may jump along
     it where it is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
     verts = prob.params["verts"].double()

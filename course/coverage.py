@@ -19,7 +19,10 @@ The algorithm
 3. **Skips**: a face that covers the whole pixel square (its edge lines hold at the 4 corners, and the far
    plane does not cut it there) and is nearer than another face g at the 4 corners (n is affine, so the
    corners decide) hides g in that pixel: g is dropped there. A pixel left with one face that covers it is
-   that face's colour (area 1, no clipping); a pixel left with one face needs no subtraction.
+   that face's colour (area 1, no clipping); a pixel left with one face needs no subtraction. And when only
+   the image matters (not each face's own colour's derivative), a pixel whose square no edge where the
+   colour can jump touches (``discontinuities.discontinuity_pixels``) shows one colour all over, the one at
+   its centre, however many faces of that colour tile it: the interior of a silhouette needs no clipping.
 4. **Visible pieces**: per (pixel, face f) the piece ``f ∩ square ∩ {z <= far}`` (Sutherland–Hodgman
    clipping, ``clip_polygon``), minus, for every other face g of the pixel, the convex region
    ``D = g ∩ {n_g > n_f} ∩ {z_g <= far}``: g's 3 or 4 edge half-planes, one depth half-plane and maybe one
@@ -64,6 +67,7 @@ import torch
 
 from . import raster, scan
 from .camera import world_to_camera
+from .discontinuities import discontinuity_pixels
 from .tensors import as_tensor
 
 __all__ = ["exact_coverage", "visible_regions", "VisibleRegions", "clip_polygon", "polygon_area",
@@ -360,11 +364,11 @@ def _pixel_chunks(pixel, size):
         lo = hi
 
 
-def _plan(verts, faces, camera, shift: bool = False) -> _Plan:
+def _plan(verts, faces, camera, shift: bool = False, mask=None) -> _Plan:
     H, W, F = camera.height, camera.width, faces.shape[0]
     vc = raster._camera_space(verts, camera)                                # (V, 3) float64, detached
     st = raster._screen_triangles(vc, faces, camera, False, reach=0.0)
-    pixel, tri = scan.pixel_triangle_pairs(st.xy, W, H)
+    pixel, tri = scan.pixel_triangle_pairs(st.xy, W, H, mask)             # mask: the pixels to plan (None: all)
     key = torch.unique(pixel * F + st.face.index_select(0, tri))            # one entry per (pixel, face)
     del pixel, tri
     pixel, face_id = key // F, key % F
@@ -657,23 +661,47 @@ def _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift):
 
 # ------------------------------------------------------------------------------------------ public API
 
-def _region_chunks(verts, faces, camera, dtype):
+def _region_chunks(verts, faces, camera, dtype, keys=None):
     """The visible pieces chunk by chunk: one ``VisibleRegions`` for the pixels a single face covers, then
-    one per chunk of at most about ``CHUNK`` (pixel, face) pairs."""
+    one per chunk of at most about ``CHUNK`` (pixel, face) pairs.
+
+    keys: None, or (F,) integers, equal for faces of one colour, when only the image matters (flat colours,
+    no derivative w.r.t. a face's own colour): a pixel whose square no edge where the colour can jump touches
+    (``discontinuities.discontinuity_pixels``: silhouettes, colour changes, crossings, near/far cuts) shows
+    one colour all over, the colour at its centre, whatever faces tile it; it comes back as one unit square
+    of the face the centre sees, unclipped. The interior of a one-colour silhouette is then skipped: no
+    piece of its thousands of interior edges is clipped. Its derivative w.r.t. the vertices is 0, as it
+    should be (moving an edge between two faces of one colour changes nothing); w.r.t. each face's colour it
+    would not be (the area of each face is not computed), hence keys only without that derivative."""
     shift = torch.is_grad_enabled() and any(x.requires_grad for x in (verts, camera.K, camera.R, camera.t))
+    square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype, device=verts.device)
+    mask = None
+    if keys is not None and torch.unique(keys).numel() < keys.numel():    # some faces share a colour
+        with torch.no_grad():
+            mesh = _Mesh(verts, faces)
+            mask = discontinuity_pixels(mesh, camera, keys).reshape(-1)     # where the colour may jump
+            seen = raster.rasterize(mesh, camera).face_id.reshape(-1)       # the centre's face elsewhere
+            quiet = (~mask & (seen >= 0)).nonzero().squeeze(1)
+        yield VisibleRegions(quiet, seen[quiet], square.expand(quiet.numel(), 4, 2),
+                             torch.full_like(quiet, 4), square.new_ones(quiet.numel()))
     with torch.no_grad():
-        plan = _plan(verts, faces, camera, shift)                           # (shift: _Pieces, ties)
+        plan = _plan(verts, faces, camera, shift, mask)                     # (shift: _Pieces, ties)
     # per-face geometry in float64 (one row per face: cheap), the pieces in dtype once pixel-relative
     verts_cam = world_to_camera(verts.double(), camera.R.double(), camera.t.double())   # (V, 3)
     geo = _face_geometry(verts_cam, faces[plan.used], camera, camera.K.double(), plan.inside, plan.flip)
     n_full = plan.full_pixel.numel()                                        # the unit square, area 1
-    square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype, device=verts.device)
     yield VisibleRegions(plan.full_pixel, plan.used[plan.full_face], square.expand(n_full, 4, 2),
                          torch.full_like(plan.full_pixel, 4), square.new_ones(n_full))
     for lo, hi in _pixel_chunks(plan.pixel, CHUNK):                         # chunks of whole pixels
         poly, count, owner = _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift)
         yield VisibleRegions(plan.pixel[lo:hi][owner], plan.used[plan.face[lo:hi][owner]], poly, count,
                              _areas(poly))
+
+
+@dataclass
+class _Mesh:
+    verts: torch.Tensor
+    faces: torch.Tensor
 
 
 def visible_regions(mesh, camera, *, dtype=None) -> VisibleRegions:
@@ -725,10 +753,13 @@ def exact_coverage(mesh, camera, face_colors, background=(0.0, 0.0, 0.0)) -> tor
     if not torch.isfinite(bg).all():
         raise ValueError("background contains NaN or inf")
     H, W = camera.height, camera.width
+    # pixels of one colour all over need no clipping, unless each face's own colour wants its derivative
+    keys = None if (colors.requires_grad and torch.is_grad_enabled()) else \
+        torch.unique(colors.detach(), dim=0, return_inverse=True)[1]
     colors = colors.to(dtype)
     image = torch.zeros(H * W, 3, dtype=dtype, device=verts.device)
     covered = torch.zeros(H * W, dtype=dtype, device=verts.device)
-    for regions in _region_chunks(verts, faces, camera, dtype):            # Σ area · colour, chunk by chunk
+    for regions in _region_chunks(verts, faces, camera, dtype, keys):      # Σ area · colour, chunk by chunk
         image = image.index_add(0, regions.pixel, regions.area[:, None] * colors[regions.face])
         covered = covered.index_add(0, regions.pixel, regions.area)
     return (image + (1 - covered)[:, None] * bg).view(H, W, 3)

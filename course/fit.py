@@ -174,11 +174,11 @@ def self_intersections(mesh) -> torch.Tensor:
     """(K, 2) pairs of faces (f < g) of ``mesh`` that cross each other and share no vertex position: where a
     fit without a regulariser has folded through itself.
 
-    Candidates come from ``antialias._intersecting_faces`` (a grid, then each face having corners on both
+    Candidates come from ``discontinuities._intersecting_faces`` (a grid, then each face having corners on both
     sides of the other's plane, conservative); a pair counts when an edge of one, as a segment, passes
     through the other (the watertight ray-triangle test with the edge as the ray, 0 <= t <= 1).
     """
-    from .antialias import _intersecting_faces
+    from .discontinuities import _intersecting_faces
     from .boundary import _weld
     from .intersect import intersect_triangles
     if not isinstance(mesh, Mesh):

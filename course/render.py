@@ -36,7 +36,8 @@ from typing import Optional, Sequence
 
 import torch
 
-from course.antialias import discontinuity_pixels, resolve, sample_fragments
+from course.antialias import resolve, sample_fragments
+from course.discontinuities import discontinuity_pixels
 from course.camera import Camera
 from course.framing import default_lights, frame_camera
 from course.mesh import Mesh

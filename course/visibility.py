@@ -188,7 +188,10 @@ def exact_gradient(prob: _Problem, names):
     field = _Field(mesh.verts, mesh.faces, cam) if prob.model == "affine" else None
     leaves = prob.targets(p, names)
     total = [torch.zeros_like(x) for x in leaves]
-    for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype):
+    keys = None                                                             # pixels of one colour all over
+    if field is None and "colors" not in names:                             # need no clipping (coverage)
+        keys = torch.unique(prob.params["colors"], dim=0, return_inverse=True)[1]
+    for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype, keys):
         if regions.pixel.numel() == 0:
             continue
         if field is None:

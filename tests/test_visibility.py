@@ -103,7 +103,7 @@ def test_reynolds_equals_the_exact_gradient_on_the_teapot():
     so the edge was not cut where it passes under the other face; (4) on a piece of edge ~1e-5 px long next
     to a vertex, the z-buffer was asked 1e-6 px beside it, across a thin wedge of face. The gradients of the
     seam copies of a vertex are compared summed: they move together (each method may credit either copy)."""
-    from course.antialias import _intersecting_faces
+    from course.discontinuities import _intersecting_faces
     from course.boundary import _weld
     mesh, cam, colors, weights = teapot_problem()
     weld = _weld(mesh.verts)
