@@ -480,11 +480,28 @@ def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, budg
     return hidden
 
 
+def _finer_cells(tests, points, cells, W, H, target=16, most=16, max_cells=1 << 24):
+    """The cells per pixel side for ``_visible_at``: ``cells`` while the points meet about ``target``
+    triangles each or fewer (every ordinary mesh); else more, a power of 2 (exact in floating point), by the
+    factor that would get there if the triangles were spread evenly (at least 2), at most ``most`` and with
+    fewer than ``max_cells`` cells in the image. Asked again at the finer grid until it settles."""
+    if tests <= 3 * target * max(points, 1):
+        return cells
+    finer = cells * 2
+    while finer < most and tests * cells * cells / (finer * finer) > target * points:
+        finer *= 2
+    while finer > cells and finer * finer * W * H > max_cells:
+        finer //= 2
+    return min(finer, most)
+
+
 def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1 << 21):
     """The face the z-buffer shows at screen points (N, 2), -1 for background or outside the image: the
     sample z-buffer of ``rasterize(samples=...)`` (same coverage rule and far plane), asked at arbitrary
-    points, with depths compared in float64 (ties to the lower face id), as ``exact_coverage`` orders faces. Each point is tested against the triangles touching its pixel. cull_backfaces: leave
-    the back faces out, when they are known never to be visible (``_back_faces_hidden``)."""
+    points, with depths compared in float64 (ties to the lower face id), as ``exact_coverage`` orders faces.
+    Each point is tested against the triangles touching its pixel (or a smaller cell, ``_finer_cells``, where
+    hundreds of faces share a pixel). cull_backfaces: leave the back faces out, when they are known never to
+    be visible (``_back_faces_hidden``)."""
     W, H = camera.width, camera.height
     col, row = torch.floor(pts[:, 0]), torch.floor(pts[:, 1])
     ok = (col >= 0) & (col < W) & (row >= 0) & (row < H)
@@ -494,15 +511,24 @@ def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1
         st = _screen_triangles(_camera_space(mesh.verts, camera), mesh.faces, camera, cull_backfaces, reach=0.0)
         if idx.numel() == 0 or st.face.numel() == 0:
             return out
-        pix = (row * W + col)[idx].long()
         px_all, py_all = pts[idx, 0].double().contiguous(), pts[idx, 1].double().contiguous()
-        order = torch.argsort(pix)
-        sorted_pix = pix[order]
-        mask = torch.zeros(H * W, dtype=torch.bool, device=pts.device)
-        mask[pix] = True
-        pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)
-        first = torch.searchsorted(sorted_pix, pair_pix)
-        count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+        cells = 1                                                           # cells per pixel side
+        while True:                                                         # the triangles of each point's cell
+            cw, ch = W * cells, H * cells
+            pix = (torch.floor(py_all * cells) * cw + torch.floor(px_all * cells)).long()
+            order = torch.argsort(pix)
+            sorted_pix = pix[order]
+            mask = torch.zeros(cw * ch, dtype=torch.bool, device=pts.device)
+            mask[pix] = True
+            pair_pix, tri = pixel_triangle_pairs(st.xy * cells, cw, ch, mask)
+            first = torch.searchsorted(sorted_pix, pair_pix)
+            count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+            # dense pixels (hundreds of faces crossing in one pixel): each point would be tested against
+            # all of them; cells a power of 2 smaller (exact in floating point) cut that to a few
+            finer = _finer_cells(int(count.sum()), idx.numel(), cells, W, H)
+            if finer == cells:
+                break
+            cells = finer
         q0, qx, qy = _plane(st)
         X = [st.xy[:, k, 0].contiguous() for k in range(3)]                 # corner columns: quick gathers
         Y = [st.xy[:, k, 1].contiguous() for k in range(3)]

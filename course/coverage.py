@@ -67,7 +67,7 @@ import torch
 
 from . import raster, scan
 from .camera import world_to_camera
-from .discontinuities import discontinuity_pixels
+from .discontinuities import _color_keys, discontinuity_pixels
 from .tensors import as_tensor
 
 __all__ = ["exact_coverage", "visible_regions", "VisibleRegions", "clip_polygon", "polygon_area",
@@ -665,7 +665,7 @@ def _region_chunks(verts, faces, camera, dtype, keys=None):
     """The visible pieces chunk by chunk: one ``VisibleRegions`` for the pixels a single face covers, then
     one per chunk of at most about ``CHUNK`` (pixel, face) pairs.
 
-    keys: None, or (F,) integers, equal for faces of one colour, when only the image matters (flat colours,
+    keys: None, or (F,) integers 0..K-1, equal for faces of one colour (``_color_keys``), when only the image matters (flat colours,
     no derivative w.r.t. a face's own colour): a pixel whose square no edge where the colour can jump touches
     (``discontinuities.discontinuity_pixels``: silhouettes, colour changes, crossings, near/far cuts) shows
     one colour all over, the colour at its centre, whatever faces tile it; it comes back as one unit square
@@ -676,7 +676,7 @@ def _region_chunks(verts, faces, camera, dtype, keys=None):
     shift = torch.is_grad_enabled() and any(x.requires_grad for x in (verts, camera.K, camera.R, camera.t))
     square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype, device=verts.device)
     mask = None
-    if keys is not None and torch.unique(keys).numel() < keys.numel():    # some faces share a colour
+    if keys is not None and keys.numel() and int(keys.max()) + 1 < keys.numel():   # faces share a colour
         with torch.no_grad():
             mesh = _Mesh(verts, faces)
             mask = discontinuity_pixels(mesh, camera, keys).reshape(-1)     # where the colour may jump
@@ -754,8 +754,7 @@ def exact_coverage(mesh, camera, face_colors, background=(0.0, 0.0, 0.0)) -> tor
         raise ValueError("background contains NaN or inf")
     H, W = camera.height, camera.width
     # pixels of one colour all over need no clipping, unless each face's own colour wants its derivative
-    keys = None if (colors.requires_grad and torch.is_grad_enabled()) else \
-        torch.unique(colors.detach(), dim=0, return_inverse=True)[1]
+    keys = None if (colors.requires_grad and torch.is_grad_enabled()) else _color_keys(colors)
     colors = colors.to(dtype)
     image = torch.zeros(H * W, 3, dtype=dtype, device=verts.device)
     covered = torch.zeros(H * W, dtype=dtype, device=verts.device)
