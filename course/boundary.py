@@ -422,14 +422,16 @@ def _split_at_crossings(a, b, s0, s1, e, pixel):
     return lo[keep], hi[keep], e[owner[keep]], pixel[owner[keep]]
 
 
-def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, budget: int = 1 << 22):
+def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, front: int = 8):
     """(N,) bool: the pieces of edge (s0, s1 on edge e, in pixel) that are certainly hidden: one face
     covers the whole piece (both ends strictly inside its triangle on screen) and is nearer than the
     piece's own face at both ends (nearness is affine along the piece), by a margin. A hidden piece
     bounds nothing visible, and where it crosses a visible piece it changes nothing there either (the face
     hiding it is in front of it at the crossing), so it needs no cuts: with K faces in a pixel most of
     the K² intersection lines are hidden, and cutting every piece against every other would cost (K²)².
-    planes: (F, 3) nearness planes of the faces (``_planes``); face: (E,) the face each edge lies on."""
+    planes: (F, 3) nearness planes of the faces (``_planes``); face: (E,) the face each edge lies on.
+    The faces are tried nearest first (at the pixel's centre), in blocks of ranks [0, front), [front, 4 front),
+    ...: the pieces a block hides are not tested against the next."""
     N = s0.numel()
     hidden = torch.zeros(N, dtype=torch.bool, device=s0.device)
     if N == 0:
@@ -442,42 +444,71 @@ def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, budg
         mask = torch.zeros(H * W, dtype=torch.bool, device=s0.device)
         mask[pixel] = True
         pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)             # the faces of each pixel
-        order = torch.argsort(pixel)                                        # pieces grouped by pixel
-        sorted_pix = pixel[order]
-        first = torch.searchsorted(sorted_pix, pair_pix)
-        count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+        q0, qx, qy = _plane(st)
+        centre = [(pair_pix % W).double() + 0.5, (pair_pix // W).double() + 0.5]
+        q = q0[tri] + qx[tri] * centre[0] + qy[tri] * centre[1]
+        near = -q if cam.orthographic else q                                # larger = nearer
+        by_depth = torch.argsort(-near, stable=True)
+        by_depth = by_depth[torch.argsort(pair_pix[by_depth], stable=True)]     # per pixel, nearest first
+        pair_pix, tri = pair_pix[by_depth], tri[by_depth]
+        _, n_pairs = torch.unique_consecutive(pair_pix, return_counts=True)
+        rank = torch.arange(pair_pix.numel(), device=s0.device) - torch.repeat_interleave(
+            torch.cumsum(n_pairs, 0) - n_pairs, n_pairs)
         d = b - a
         ends = [a[e] + s[:, None] * d[e] for s in (s0, s1)]                 # (N, 2) each
         own = [(planes[face[e]] * torch.cat([x, torch.ones_like(x[:, :1])], 1)).sum(1) for x in ends]
-        q0, qx, qy = _plane(st)
-        far = -cam.far if cam.orthographic else 1 / cam.far
-        xy = st.xy
-        area_sign = 1.0                                                     # st triangles: positive area
-        size = (xy.amax(1) - xy.amin(1)).amax(1)                            # (T,) for the margins
-        ends_cum = torch.cumsum(count, 0)
+        test = (st, q0, qx, qy, ends, own, -cam.far if cam.orthographic else 1 / cam.far, cam.orthographic)
         lo = 0
-        while lo < pair_pix.numel():                                        # about ``budget`` tests at a time
-            hi = int(torch.searchsorted(ends_cum, ends_cum[lo] - count[lo] + budget, right=True).clamp(min=lo + 1))
-            c = count[lo:hi]
-            pair = torch.repeat_interleave(torch.arange(lo, hi, device=s0.device), c)
-            k = order[first[pair] + (torch.arange(pair.numel(), device=s0.device)
-                                     - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]   # the piece
-            t = tri[pair]                                                   # the face that may hide it
-            cover = torch.ones_like(k, dtype=torch.bool)
-            for x, n_own in zip(ends, own):
-                px, py = x[k, 0], x[k, 1]
-                for j in range(3):                                          # strictly inside, by a margin
-                    ax, ay = xy[t, j, 0], xy[t, j, 1]
-                    bx, by = xy[t, (j + 1) % 3, 0], xy[t, (j + 1) % 3, 1]
-                    ef = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
-                    cover &= ef * area_sign > 1e-9 * size[t] * ((bx - ax).abs() + (by - ay).abs())
-                q = q0[t] + qx[t] * px + qy[t] * py
-                n = -q if cam.orthographic else q                           # larger = nearer
-                n_k = n_own[k]
-                cover &= (n > n_k + 1e-9 * n_k.abs()) & (n >= far)
-            hidden[k[cover]] = True
+        while lo <= int(rank.max()):                                        # the nearest faces first: a piece
+            hi = lo + front if lo == 0 else 4 * lo                          # hidden by them is not tested again
+            rest = (~hidden).nonzero().squeeze(1)
+            if rest.numel() == 0:
+                break
+            block = (rank >= lo) & (rank < hi)
+            hidden[_covered(rest, pixel[rest], pair_pix[block], tri[block], test)] = True
             lo = hi
     return hidden
+
+
+def _covered(pieces, pixel, pair_pix, tri, test, budget: int = 1 << 22):
+    """The pieces (indices, (n,), in pixels (n,)) that one of the (pixel, triangle) pairs covers and is
+    nearer than (``_hidden_pieces``), about ``budget`` tests at a time. Returns their indices."""
+    st, q0, qx, qy, ends, own, far, ortho = test
+    xy = st.xy
+    size = (xy.amax(1) - xy.amin(1)).amax(1)                                # (T,) for the margins
+    order = torch.argsort(pixel)                                            # pieces grouped by pixel
+    sorted_pix = pixel[order]
+    first = torch.searchsorted(sorted_pix, pair_pix)
+    count = torch.searchsorted(sorted_pix, pair_pix, right=True) - first
+    ends_cum = torch.cumsum(count, 0)
+    out = []
+    lo = 0
+    while lo < pair_pix.numel():
+        hi = int(torch.searchsorted(ends_cum, ends_cum[lo] - count[lo] + budget, right=True).clamp(min=lo + 1))
+        c = count[lo:hi]
+        pair = torch.repeat_interleave(torch.arange(lo, hi, device=pixel.device), c)
+        k = pieces[order[first[pair] + (torch.arange(pair.numel(), device=pixel.device)
+                                        - torch.repeat_interleave(torch.cumsum(c, 0) - c, c))]]   # the piece
+        t = tri[pair]                                                       # the face that may hide it
+        for x, n_own in zip(ends, own):                                     # nearer at both ends, by a margin
+            px, py = x[k, 0], x[k, 1]
+            q = q0[t] + qx[t] * px + qy[t] * py
+            n = -q if ortho else q                                          # larger = nearer
+            n_k = n_own[k]
+            keep = ((n > n_k + 1e-9 * n_k.abs()) & (n >= far)).nonzero().squeeze(1)
+            k, t = k[keep], t[keep]
+        for x in ends:                                                      # strictly inside, by a margin
+            px, py = x[k, 0], x[k, 1]
+            inside = torch.ones_like(k, dtype=torch.bool)
+            for j in range(3):                                              # st triangles: positive area
+                ax, ay = xy[t, j, 0], xy[t, j, 1]
+                bx, by = xy[t, (j + 1) % 3, 0], xy[t, (j + 1) % 3, 1]
+                ef = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+                inside &= ef > 1e-9 * size[t] * ((bx - ax).abs() + (by - ay).abs())
+            k, t = k[inside], t[inside]
+        out.append(k)
+        lo = hi
+    return torch.cat(out) if out else pieces[:0]
 
 
 def _finer_cells(tests, points, cells, W, H, target=16, most=16, max_cells=1 << 24):

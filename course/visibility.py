@@ -72,6 +72,7 @@ from .boundary import _weld, boundary_gradient, boundary_points
 from .camera import Camera
 from .coverage import _region_chunks, exact_coverage
 from .coverage_affine import _Field, exact_affine_coverage, polygon_centroids
+from .discontinuities import _color_keys
 from .raster import _check_inputs, interpolate, rasterize
 from .nmr import nmr_image, nmr_rasterize
 from .soft import soft_rasterize
@@ -190,7 +191,7 @@ def exact_gradient(prob: _Problem, names):
     total = [torch.zeros_like(x) for x in leaves]
     keys = None                                                             # pixels of one colour all over
     if field is None and "colors" not in names:                             # need no clipping (coverage)
-        keys = torch.unique(prob.params["colors"], dim=0, return_inverse=True)[1]
+        keys = _color_keys(prob.params["colors"])
     for regions in _region_chunks(mesh.verts, mesh.faces, cam, prob.dtype, keys):
         if regions.pixel.numel() == 0:
             continue
