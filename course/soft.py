@@ -24,8 +24,10 @@ at the pixel must reach ``threshold`` (sigmoid *and* softmax factor, so the erro
 The candidates come from a screen-space radius around each face (``_candidate_pairs``, row by row as in
 ``scan.pixel_triangle_pairs``), built for a group of faces at a time (about CHUNK pairs) and thresholded
 group by group, so only the pairs that matter are ever stored (at γ = 1e-4 a 512² image has some 10⁸
-candidates and a few million that matter); the per-pair work runs on (N,) vectors of pairs, chunked, each
-chunk's graph recomputed during backward instead of stored, so no faces × pixels tensor is ever formed.
+candidates and a few million that matter, stored as two int32 ids each); the per-pair work runs on (N,)
+vectors of pairs, CHUNK at a time, each chunk's terms added into per-pixel sums and forgotten, its graph
+recomputed during backward instead of stored (``_ColorSums``; the silhouette's groups are checkpointed), so
+neither a faces × pixels tensor nor a tensor per kept pair beyond their ids is ever formed.
 Faces crossing the near plane are clipped there, as ``rasterize`` does.
 
 The limits: σ → 0 alone makes each D a step, but a fixed γ still blends overlapping faces; γ → 0 alone
@@ -310,13 +312,12 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma              # (T,) largest useful x
     pixel, tri, top, z_top = _color_pairs(xy.detach(), near, (x_reach / s).sqrt(), W, H, s, gamma, eps,
                                           math.log(threshold))
-    w, wc = _per_pair(_color_terms, tri, pixel, xy, q, face, colors if attr is None else attr, W, s, gamma,
-                      (top - z_top / gamma).to(dtype), z_top.to(dtype), camera)   # (N,), (N, C)
     w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
-    C = colors.shape[1]
-    num = (w_bg[:, None] * bg).index_add(0, pixel, wc)                      # (H*W, C)
-    den = w_bg.index_add(0, pixel, w)
-    return (num / den[:, None]).view(H, W, C)
+    # the background's term plus every kept pair's w and w c, summed per pixel CHUNK pairs at a time; no
+    # per-pair tensor outlives its chunk, in the forward or the backward pass (``_ColorSums``)
+    num, den = _ColorSums.apply(w_bg[:, None] * bg, w_bg, xy, q, colors if attr is None else attr, face, tri,
+                                pixel, (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera))
+    return (num / den[:, None]).view(H, W, colors.shape[1])              # (H*W, C) / (H*W, 1)
 
 
 def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s):
@@ -333,7 +334,8 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
     radius: (T,) the candidate radius in pixels. Every candidate's log-weight is
     ``log_w = logsigmoid(x) + z/γ`` (float64: z/γ reaches 1e5); per pixel ``top`` is the largest log_w (at
     least the background's ε/γ) and ``z_top`` the largest z; a pair is kept if log_w - top >= log_thr.
-    Returns pixel (N,), tri (N,) of the kept pairs (grouped by triangle) and top, z_top (H*W,) float64.
+    Returns pixel (N,), tri (N,) of the kept pairs (grouped by triangle; int32 when the image and the mesh
+    allow, half the memory of int64) and top, z_top (H*W,) float64.
     The differentiable pass takes each weight as ``exp((z - z_top)/γ + logsigmoid(x) - (top - z_top/γ))``:
     nothing of size 1/γ reaches float32.
 
@@ -344,9 +346,10 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
     xy64 = xy.double()
     top = torch.full((H * W,), eps / gamma, dtype=torch.float64, device=xy.device)
     z_top = torch.full((H * W,), eps, dtype=torch.float64, device=xy.device)
-    none = torch.zeros(0, dtype=torch.int64, device=xy.device)
-    kept = [(none, none, none.double())]                                    # (pixel, tri, log_w) survivors
-    n_kept, limit = 0, CHUNK
+    # the survivors are stored as int32 where every pixel and triangle id fits (the candidates stay int64:
+    # scatter_reduce_ wants int64 indices); at a large σ there are tens of millions of them
+    index = torch.int32 if max(H * W, xy.shape[0]) < 2 ** 31 else torch.int64
+    kept = _Survivors(index, xy.device)
     with torch.no_grad():
         for lo, hi in _triangle_groups(xy64, radius, W, H):
             pix, t = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)
@@ -358,17 +361,49 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
             z_top.scatter_reduce_(0, pix, z, reduce="amax")
             top.scatter_reduce_(0, pix, log_w, reduce="amax")
             ok = log_w - top[pix] >= log_thr                                # the best so far: a lower bound
-            kept.append((pix[ok], t[ok], log_w[ok]))
-            n_kept += kept[-1][0].numel()
-            if n_kept > limit:                                              # prune against the best so far
-                pixel, tri, lw = map(torch.cat, zip(*kept))
-                ok = lw - top[pixel] >= log_thr
-                kept = [(pixel[ok], tri[ok], lw[ok])]
-                n_kept = kept[0][0].numel()
-                limit = 2 * n_kept + CHUNK                                  # amortised: linear in the pairs
-        pixel, tri, log_w = map(torch.cat, zip(*kept))
-        keep = (log_w - top[pixel] >= log_thr).nonzero().squeeze(1)        # against the final top
-    return pixel[keep], tri[keep], top, z_top
+            kept.add(pix[ok], t[ok], log_w[ok], top, log_thr)
+        pixel, tri = kept.result(top, log_thr)                              # against the final top
+    return pixel, tri, top, z_top
+
+
+class _Survivors:
+    """The pairs kept so far by ``_color_pairs``, (pixel, tri, log_w), in three buffers that grow by doubling.
+
+    Not a list of small tensors, one per group of faces: those, left among each group's freed temporary
+    tensors, fragment the C heap, and the process then holds many times what they hold (S1 at 512²,
+    σ = 1e-4: 0.57 GB of memory for 0.03 GB of pairs). When the buffers are full the pairs already below
+    threshold against the best so far are dropped first (in place, the order kept); only if more than half
+    is still taken do the buffers double, so pruning costs O(1) per pair, amortised."""
+
+    def __init__(self, index, device):
+        self.bufs = [torch.empty(CHUNK, dtype=index, device=device), torch.empty(CHUNK, dtype=index, device=device),
+                     torch.empty(CHUNK, dtype=torch.float64, device=device)]
+        self.n = 0                                                          # the first n entries are pairs
+
+    def add(self, pixel, tri, log_w, top, log_thr):
+        k = pixel.numel()
+        if self.n + k > self.bufs[0].numel():                               # full: prune against the best so far
+            self.prune(top, log_thr)
+            if 2 * (self.n + k) > self.bufs[0].numel():                     # still over half full: double
+                for i, b in enumerate(self.bufs):                           # one at a time: one old buffer alive
+                    self.bufs[i] = torch.cat([b[:self.n], b.new_empty(2 * (self.n + k) - self.n)])
+        for b, v in zip(self.bufs, (pixel, tri, log_w)):
+            b[self.n:self.n + k] = v                                        # int64 ids → int32 on the way
+        self.n += k
+
+    def prune(self, top, log_thr):
+        """Keep, in place and in order, the pairs still within log_thr of ``top`` at their pixel."""
+        pix, lw = self.bufs[0][:self.n], self.bufs[2][:self.n]
+        keep = (lw - top[pix] >= log_thr).nonzero().squeeze(1)
+        for b in self.bufs:
+            b[:keep.numel()] = b[:self.n].index_select(0, keep)             # a copy first, then written back
+        self.n = keep.numel()
+
+    def result(self, top, log_thr):
+        """pixel (N,), tri (N,): the pairs within log_thr of the final ``top``, in their own tensors (the
+        buffers, up to twice as long, are freed)."""
+        self.prune(top, log_thr)
+        return self.bufs[0][:self.n].clone(), self.bufs[1][:self.n].clone()
 
 
 def _checkpointed(recompute, fn, *args):
@@ -378,15 +413,59 @@ def _checkpointed(recompute, fn, *args):
     return checkpoint(fn, *args, use_reentrant=False) if recompute and grad else fn(*args)
 
 
-def _per_pair(fn, tri, pixel, *args):
-    """``fn(tri, pixel, *args)`` over the pairs, CHUNK at a time. With gradients, each chunk beyond the first
-    is recomputed during backward instead of stored (``torch.utils.checkpoint``), so memory stays bounded
-    however many pairs σ and γ ask for; a single chunk (the common case) runs plainly."""
-    if pixel.numel() <= CHUNK:
-        return fn(tri, pixel, *args)
-    parts = [_checkpointed(True, fn, tri[lo:lo + CHUNK], pixel[lo:lo + CHUNK], *args)
-             for lo in range(0, pixel.numel(), CHUNK)]
-    return tuple(map(torch.cat, zip(*parts))) if isinstance(parts[0], tuple) else torch.cat(parts)
+class _ColorSums(torch.autograd.Function):
+    """The colour softmax's per-pixel sums, ``num = bg_num + Σ w c`` (H*W, C) and ``den = bg_den + Σ w``
+    (H*W,), over the kept pairs (``_color_terms`` gives each pair's w and w c), in bounded memory.
+
+    Stored per pair, w and w c (32 bytes a pair in float64, plus their gradients and a copy when chunks are
+    joined) were most of the memory once σ is large (S1 at 512², σ = 1e-3: 14 million kept pairs). Here
+    the forward pass adds each chunk of CHUNK pairs into the two sums (``index_add_``) and forgets it; the
+    backward pass rebuilds one chunk at a time with its graph, pulls the pixels' gradients back through it
+    and forgets it too (a checkpoint per chunk, without keeping a per-pair output). The sums are added in
+    the pairs' order, the same numbers as one ``index_add`` over all of them.
+
+    Inputs: bg_num (H*W, C) and bg_den (H*W,), the background's term (where the sums start); xy (T, 3, 2),
+    q (T, 3) and colors ((F, C) face colours or (T, 3, C) vertex colours): the differentiable ones; face (T,),
+    tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest: (W, s, gamma, camera), the other arguments
+    of ``_color_terms``. Differentiable once (no double backward)."""
+
+    @staticmethod
+    def forward(ctx, bg_num, bg_den, xy, q, colors, face, tri, pixel, top, z_top, rest):
+        ctx.save_for_backward(xy, q, colors, face, tri, pixel, top, z_top)
+        ctx.rest = rest
+        W, s, gamma, camera = rest
+        num, den = bg_num.clone(), bg_den.clone()                           # forward runs without a graph
+        for lo in range(0, pixel.numel(), CHUNK):
+            p = pixel[lo:lo + CHUNK]
+            w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy, q, face, colors, W, s, gamma, top, z_top, camera)
+            num.index_add_(0, p, wc)                                        # this chunk's terms, added in place
+            den.index_add_(0, p, w)
+        return num, den
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_num, g_den):
+        xy, q, colors, face, tri, pixel, top, z_top = ctx.saved_tensors
+        W, s, gamma, camera = ctx.rest
+        need = ctx.needs_input_grad[2:5]                                    # xy, q, colors
+        grads = [torch.zeros_like(x) if n else None for x, n in zip((xy, q, colors), need)]
+        if any(need):
+            with torch.enable_grad():
+                # detached copies: the chunk's graph starts here and is freed after each chunk's grad
+                xy_, q_, colors_ = (x.detach().requires_grad_(n) for x, n in zip((xy, q, colors), need))
+                wrt = [x for x, n in zip((xy_, q_, colors_), need) if n]
+                for lo in range(0, pixel.numel(), CHUNK):
+                    p = pixel[lo:lo + CHUNK]
+                    w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy_, q_, face, colors_, W, s, gamma, top, z_top,
+                                         camera)
+                    # d(sum)/d(term) is 1 at the term's pixel: each pair's gradient is its pixel's
+                    part = iter(torch.autograd.grad((w, wc), wrt, (g_den.index_select(0, p),
+                                                                   g_num.index_select(0, p))))
+                    for i, n in enumerate(need):
+                        if n:
+                            grads[i] += next(part)
+        # bg_num, bg_den: the sums start from them (gradient 1); nothing for the integers and constants
+        return (g_num, g_den, *grads) + (None,) * 6
 
 
 def _silhouette_terms(tri, pixel, xy, W, s):

@@ -84,3 +84,30 @@ def test_nmr_backward_never_holds_all_its_terms(monkeypatch, cull):
                                  mesh, cam)
         # reach None: every (face, row) pair visits the whole row, faces × rows × W terms (> 200,000 here)
         assert largest <= max(4 * 2048, 4 * SIZE * SIZE, 3 * 1280 * 12), largest
+
+
+def test_soft_colour_backward_holds_nothing_per_kept_pair(monkeypatch):
+    """Colour mode sums the kept pairs' terms into per-pixel buffers CHUNK pairs at a time and its backward
+    recomputes them chunk by chunk (``soft._ColorSums``): no tensor made during backward is as big as the kept
+    pairs' (N, C) colours or the gradients of all their weights, only chunks and per-pixel maps."""
+    mesh, cam = scene()
+    monkeypatch.setattr(soft, "CHUNK", 2048)
+    kept = {}
+    color_pairs = soft._color_pairs
+
+    def counted(*args):
+        out = color_pairs(*args)
+        kept["N"] = out[0].numel()
+        return out
+    monkeypatch.setattr(soft, "_color_pairs", counted)
+    verts = mesh.verts.clone().requires_grad_()
+    colours = torch.rand(1280, 3, generator=torch.Generator().manual_seed(1), dtype=torch.float64).requires_grad_()
+    img = soft_rasterize(Mesh(verts, mesh.faces), cam, mode="color", sigma=1e-3, gamma=1e-4, face_colors=colours,
+                         cull_backfaces=False)
+    w = torch.randn(SIZE, SIZE, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    with LargestTensor() as probe:
+        (img * w).sum().backward()
+    assert torch.isfinite(verts.grad).all() and verts.grad.abs().sum() > 0 and colours.grad.abs().sum() > 0
+    bound = max(3 * 2048, SIZE * SIZE * 3)                                  # a chunk's (CHUNK, C), an (H*W, C) map
+    assert kept["N"] * 3 > 3 * bound                                        # many chunks of kept pairs
+    assert probe.largest <= bound, (probe.largest, kept["N"])
