@@ -21,6 +21,9 @@ from .registry import (DEFAULT_TIMEOUT, TASKS, CheckTimeout, Result, Task, check
                        tasks_for_lecture)
 from . import lecture01, lecture02, lecture03, lecture04, lecture05, lecture06, lecture07, lecture08, lecture09, lecture10  # noqa: F401  (importing them registers every task)
 from .grader import cli, grade_notebook
+from .registry import _explain_undefined_task_functions
+
+_explain_undefined_task_functions()          # in a notebook: "run the cell that defines `f` first", not a NameError
 
 __all__ = [
     "Task", "Result", "TASKS", "task", "tasks_for_lecture", "Fail", "CheckTimeout", "require", "grade_parts",

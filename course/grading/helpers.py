@@ -41,11 +41,16 @@ def generator(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(seed)
 
 
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?")     # 3, -0.25, 1e-4 in a message
+
+
 def grade_parts(*parts) -> tuple[int, str]:
     """Run ``(points, label, fn)`` parts; ``fn()`` passes by returning, fails by raising ``Fail``.
 
     An exception from the student's code fails that part only, with a one-line summary. A student who has
     not started (``NotImplementedError``) or whose code hangs stops the whole check (see ``run_check``).
+    A diagnosis is said once per task: a second case failing with the same explanation, up to its numbers
+    ("shape (4,) expected, got ()" and "shape (3,) expected, got ()"), adds nothing to the message.
     """
     earned, messages, seen = 0, [], set()
     for points, label, fn in parts:
@@ -64,8 +69,9 @@ def grade_parts(*parts) -> tuple[int, str]:
         except Exception as exc:                                           # the student's code raised
             explanation = summarize_exception(exc)
             message = f"{label}: {explanation}"
-        if explanation not in seen:                                       # the same mistake is said once
-            seen.add(explanation)
+        key = _NUMBER.sub("#", explanation)                              # the same mistake is said once,
+        if key not in seen:                                               # whatever the case's numbers
+            seen.add(key)
             messages.append(message)
     return earned, "; ".join(messages)
 

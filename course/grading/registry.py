@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import signal
+import textwrap
 import threading
 import time
 import types
@@ -266,12 +267,61 @@ def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT, *, al
     return Result(t.id, t.name, points, t.points, message if points < t.points else "")
 
 
+MESSAGE_WIDTH = 100             # a check cell's hint is wrapped at words to this many characters
+
+
 def format_result(result: Result) -> str:
-    """``Task 3.2 barycentric: 1/2``, then the message indented on a second line when points were lost."""
+    """``Task 3.2 barycentric: 1/2``, then the message when points were lost, indented on the lines below and
+    wrapped at words (``MESSAGE_WIDTH``), each diagnosis (they are joined by "; ") starting a line of its own.
+    ``Result.message`` itself stays one line: the grader's score table and JSON hold it as it is."""
     line = f"Task {result.task} {result.name}: {result.points}/{result.max_points}"
     if result.message and (result.points < result.max_points or not result.max_points):
-        line += "\n    " + result.message
+        for diagnosis in _diagnoses(result.message):
+            line += "\n" + textwrap.fill(diagnosis, MESSAGE_WIDTH, initial_indent="    ", subsequent_indent="      ",
+                                         break_long_words=False, break_on_hyphens=False)
     return line
+
+
+def _diagnoses(message: str) -> list[str]:
+    """A message split where ``grade_parts`` joined its diagnoses: at "; " followed by a case's label, which
+    names the student's function with its arguments ("soft_silhouette(faint coverage ...): ...")."""
+    parts = [message]
+    for name in {t.name for t in TASKS.values()}:
+        parts = [piece for part in parts for piece in _split_before(part, "; " + name + "(")]
+    return parts
+
+
+def _split_before(text: str, marker: str) -> list[str]:
+    pieces = text.split(marker)
+    return [pieces[0]] + [marker[2:] + p for p in pieces[1:]]
+
+
+def _explain_undefined_task_functions() -> None:
+    """In IPython, a NameError for a task's function (a check cell run before the cell that defines the
+    function, or after a kernel restart) is shown as what to do: "run the cell that defines
+    `central_difference` (task 9.1) first". Other exceptions are shown as IPython shows them. Installed when
+    ``course.grading`` is imported (an exercise notebook's first cell); does nothing outside IPython."""
+    try:
+        from IPython import get_ipython
+    except ImportError:
+        return
+    shell = get_ipython()
+    if shell is None or getattr(shell, "_course_name_errors", False):
+        return
+
+    def handler(self, etype, value, tb, tb_offset=None):
+        name = getattr(value, "name", None)
+        tasks = sorted((t for t in TASKS.values() if t.name == name), key=lambda t: _task_key(t.id))
+        if tasks:
+            ids = " / ".join(t.id for t in tasks)
+            value = NameError(f"`{name}` is not defined yet: run the cell that defines `{name}` (task {ids}) "
+                              "first, then this cell again")
+            value.name = name
+            tb = None                                                     # the message says it all
+        self.showtraceback((etype, value, tb), tb_offset=tb_offset)
+
+    shell.set_custom_exc((NameError,), handler)
+    shell._course_name_errors = True
 
 
 def check(task_id: str, impl, *, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
