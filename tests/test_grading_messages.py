@@ -56,3 +56,18 @@ def test_a_check_cell_run_before_its_function_says_which_cell_to_run():
     other = nb.cells[2].outputs[0]                                          # any other name: as IPython says it
     assert other["ename"] == "NameError" and other["evalue"] == "name 'not_a_task_function' is not defined"
     assert nb.cells[3].outputs[0]["text"] == "the notebook goes on\n"
+
+
+def test_a_student_grades_their_own_work_under_their_own_name(tmp_path):
+    from pathlib import Path
+
+    from course.grading.grader import DuplicateSubmission, _table, one_student
+    a, b = tmp_path / "work" / "01_representations_and_transforms.ipynb", tmp_path / "work" / "03_rasterization.ipynb"
+    subs = one_student([a, b, a], "Ada Lovelace")
+    assert [(s.path, s.student, s.lecture) for s in subs] == [(a, "Ada Lovelace", 1), (b, "Ada Lovelace", 3)]
+    table = _table([(subs[0], [Result("1.1", "rodrigues", 2, 2)])], ["1.1"], True)
+    assert table.splitlines()[1].split()[:2] == ["Ada", "Lovelace"]
+    with pytest.raises(DuplicateSubmission, match="both lecture 01 of student 'Ada'"):
+        one_student([a, Path("solutions/01_representations_and_transforms.ipynb")], "Ada")
+    with pytest.raises(ValueError, match="--student needs a name"):
+        one_student([a], "  ")

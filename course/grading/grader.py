@@ -245,6 +245,22 @@ def assign_students(paths, mode: str = "auto") -> tuple[list[Submission], bool, 
     return submissions, True, ""
 
 
+def one_student(paths, name: str) -> list[Submission]:
+    """Every notebook of ``paths`` handed in by ``name`` (a student grading their own ``work/``); two notebooks
+    of one lecture raise ``DuplicateSubmission``, an empty name ``ValueError``."""
+    name = str(name).strip()
+    if not name:
+        raise ValueError("--student needs a name, e.g. --student \"Ada Lovelace\"")
+    submissions, seen = [], {}
+    for p in dict.fromkeys(Path(p) for p in paths):
+        s = Submission(p, name, _lecture_number(p))
+        if s.lecture is not None and seen.setdefault(s.lecture, p) != p:
+            raise DuplicateSubmission(f"{seen[s.lecture]} and {p} are both lecture {s.lecture:02d} of student "
+                                      f"{name!r}: grade one of them")
+        submissions.append(s)
+    return submissions
+
+
 def grade_notebooks(paths, timeout: float = 60.0, jobs: int = 1, progress: bool = True) -> list[list[Result]]:
     """``grade_notebook`` for each of ``paths``, ``jobs`` at a time; the results in the order of ``paths``.
 
@@ -352,7 +368,7 @@ def _write_gradebook(path: Path, graded: Graded, task_ids: list[str]) -> None:
 
 
 def cli(argv: list[str] | None = None) -> int:
-    """``python -m course grade NOTEBOOK... [--jobs N] [--students MODE] [--json FILE] [--csv FILE]
+    """``python -m course grade NOTEBOOK... [--jobs N] [--students MODE | --student NAME] [--json FILE] [--csv FILE]
     [--gradebook FILE] [--timeout SECONDS]``."""
     parser = argparse.ArgumentParser(
         prog="python -m course grade",
@@ -367,6 +383,9 @@ def cli(argv: list[str] | None = None) -> int:
                         help="folder: the student comes from the path, two notebooks of one student and lecture "
                              "are an error; notebook: each notebook on its own; auto (default): folder, unless "
                              "two notebooks share a student and lecture")
+    parser.add_argument("--student", metavar="NAME",
+                        help="every notebook given is this student's (your own work/ notebooks: "
+                             "--student \"Ada Lovelace\"); two of one lecture are an error")
     parser.add_argument("--json", type=Path, metavar="FILE",
                         help="write {notebook: [{student, task, points, max_points, message}]}")
     parser.add_argument("--csv", type=Path, metavar="FILE",
@@ -387,8 +406,11 @@ def cli(argv: list[str] | None = None) -> int:
         return 2
     mode = "folder" if args.gradebook and args.students == "auto" else args.students
     try:
-        submissions, by_student, note = assign_students(args.notebooks, mode)
-    except DuplicateSubmission as exc:
+        if args.student is not None:
+            submissions, by_student, note = one_student(args.notebooks, args.student), True, ""
+        else:
+            submissions, by_student, note = assign_students(args.notebooks, mode)
+    except (DuplicateSubmission, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if note:
