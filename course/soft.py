@@ -33,7 +33,11 @@ Faces crossing the near plane are clipped there, as ``rasterize`` does.
 The limits: σ → 0 alone makes each D a step, but a fixed γ still blends overlapping faces; γ → 0 alone
 picks the nearest face among all those with D > 0, and every face has D > 0 everywhere, so a nearer face
 far outside a pixel wins over the background: the silhouette of the colour image fattens by about
-``sqrt(σ (z - ε) / γ)`` (NDC). Along σ = γ² both go to 0 together and the image tends to the hard
+``sqrt(σ (z - ε) / γ)`` (NDC). That is the uncut formula, which the default ``cutoff="relative"`` follows
+to within ``threshold``; the reference SoftRas code drops every pair with D < 1e-4 (``cutoff="absolute"``)
+and PyTorch3D every face beyond ``blur_radius``, which bounds the fattening by that radius. Both also
+normalise depth linearly, (far - z) / (far - near) (``depth="linear"``), where the default here is inverse
+depth. Along σ = γ² both go to 0 together and the image tends to the hard
 rasterizer's, at pixels farther than a pixel from any edge (``tests/test_soft.py`` measures both).
 
 It gives a gradient with respect to ``mesh.verts``, the colours, and the camera's K, R, t.
@@ -104,13 +108,17 @@ def _project_safe(verts_cam, camera, K):
     return _project(verts_cam, camera, K)
 
 
-def _nearness(q, camera):
-    """Normalised inverse depth z ∈ [0, 1] from q: 1 at the near plane, 0 at the far plane, larger = nearer.
-    Perspective: ``(1/depth - 1/far) / (1/near - 1/far)``, affine in q = 1/depth and so affine on screen.
-    Orthographic (q = depth): ``(far - depth) / (far - near)``."""
+def _nearness(q, camera, depth: str = "inverse"):
+    """Normalised depth z ∈ [0, 1] from q: 1 at the near plane, 0 at the far plane, larger = nearer.
+    Perspective, ``depth="inverse"`` (the default): ``(1/depth - 1/far) / (1/near - 1/far)``, affine in
+    q = 1/depth and so affine on screen; ``depth="linear"`` (the reference SoftRas code and PyTorch3D):
+    ``(far - depth) / (far - near)`` with depth = 1/q. Orthographic (q = depth): ``(far - depth) / (far - near)``
+    either way."""
     n, f = camera.near, camera.far
     if camera.orthographic:
         return (f - q) / (f - n)
+    if depth == "linear":
+        return (f - 1 / q) / (f - n)
     return (q - 1 / f) / (1 / n - 1 / f)
 
 
@@ -223,10 +231,12 @@ def _pair_terms(xy, tri, pixel, W, s, bary: bool = True):
     return x, [bk / total for bk in b]
 
 
-def _check_soft(mode, sigma, gamma, threshold, eps):
+def _check_soft(mode, sigma, gamma, threshold, eps, cutoff="relative", depth="inverse"):
     """The checked scalar options of ``soft_rasterize``, as floats (ValueError naming the one that is wrong)."""
-    if not isinstance(mode, str) or mode not in ("silhouette", "color"):
-        raise ValueError(f"mode must be 'silhouette' or 'color', got {mode!r}")
+    for name, value, allowed in (("mode", mode, ("silhouette", "color")), ("cutoff", cutoff, ("relative", "absolute")),
+                                 ("depth", depth, ("inverse", "linear"))):
+        if not isinstance(value, str) or value not in allowed:
+            raise ValueError(f"{name} must be {allowed[0]!r} or {allowed[1]!r}, got {value!r}")
     sigma = _check_real(sigma, "sigma", low=0, low_open=True)
     gamma = _check_real(gamma, "gamma", low=0, low_open=True)
     threshold = _check_real(threshold, "threshold", low=0, high=1, low_open=True, high_open=True)
@@ -262,7 +272,8 @@ def _background(background, C, dtype, device):
 
 def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-4, gamma: float = 1e-4,
                    face_colors=None, vertex_colors=None, background=0.0, threshold: float = 1e-4,
-                   eps: float = 1e-3, cull_backfaces: bool = True) -> torch.Tensor:
+                   eps: float = 1e-3, cull_backfaces: bool = True, cutoff: str = "relative",
+                   depth: str = "inverse") -> torch.Tensor:
     """Soft rasterization (Liu et al. 2019): a silhouette or colour image smooth in every vertex position.
 
     mesh: ``verts`` (V, 3) world space, ``faces`` (F, 3) int64; camera: a ``Camera`` (perspective or
@@ -272,19 +283,26 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     barycentrics (clamped to the triangle outside it); finite, integers are taken as floats.
     background: (C,) or a number (colour mode; a silhouette's background is 0).
     sigma: sharpness, in the paper's NDC units (image width 2): ``σ_px = σ W² / 4`` px².
-    gamma: the depth softmax's temperature; z is the normalised inverse depth (``_nearness``); eps: the
-    background's z. threshold: a pair (pixel, face) is skipped when its term, relative to the pixel's
-    largest (the background included), is below it: D_j < threshold for silhouettes,
-    ``D_j exp(z_j/γ) < threshold · max_k(D_k exp(z_k/γ), exp(ε/γ))`` for colour, so the error per face is
-    below threshold however small γ is. Candidates come from a screen-space radius: for a silhouette
-    ``r² = σ_px log(1/threshold)``; for colour the radius grows with ``(z_j - ε) / γ``, because a nearer face far
-    outside a pixel can still outweigh the background (the fattening a tiny γ causes).
+    gamma: the depth softmax's temperature; z is the normalised depth (``_nearness``); eps: the
+    background's z. depth: ``"inverse"`` (default), z affine in 1/depth; ``"linear"``, z = (far - depth) /
+    (far - near) as in the reference SoftRas code and PyTorch3D (the same for an orthographic camera): γ
+    values tuned for one do not carry over to the other.
+    threshold and cutoff: which pairs (pixel, face) are skipped. ``cutoff="relative"`` (default): a pair whose
+    term, relative to the pixel's largest (the background included), is below threshold: D_j < threshold for
+    silhouettes, ``D_j exp(z_j/γ) < threshold · max_k(D_k exp(z_k/γ), exp(ε/γ))`` for colour, so the error per
+    face against the uncut formula is below threshold however small γ is. Candidates come from a screen-space
+    radius: for a silhouette ``r² = σ_px log(1/threshold)``; for colour the radius grows with
+    ``(z_j - ε) / γ``, because a nearer face far outside a pixel can still outweigh the background (the
+    fattening a tiny γ causes). ``cutoff="absolute"``: exactly the pairs with D_j < threshold are dropped,
+    whatever their depth, as the reference SoftRas code does (it drops a face outside a pixel where
+    d² >= σ log(1/ε_d - 1), i.e. D <= ε_d, ε_d = 1e-4 by default: threshold's default); the colour
+    image then differs from the uncut formula, and no face spreads beyond ``r² = σ_px log(1/threshold - 1)``.
     cull_backfaces: skip faces facing away (front faces are CCW). Faces crossing the near plane are clipped.
     A mesh without faces gives the background. Memory is bounded by CHUNK pairs, not by the number of
     candidates. Differentiable w.r.t. verts, the colours and the camera's K, R and t; dtype and device of
     the inputs.
     """
-    sigma, gamma, threshold, eps = _check_soft(mode, sigma, gamma, threshold, eps)
+    sigma, gamma, threshold, eps = _check_soft(mode, sigma, gamma, threshold, eps, cutoff, depth)
     cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
@@ -297,6 +315,8 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
                                       colors if vertex_colors is not None and mode == "color" else None)
     s = 4.0 / (W * W * sigma)                                               # 1 / σ_px
     x_max = math.log(1 / threshold)                                         # sigmoid(-x) >= thr ⇒ x <= this
+    # cutoff="absolute": a pair is dropped exactly where D = sigmoid(x) < threshold, i.e. x < x_cut
+    x_cut = math.log(threshold) - math.log1p(-threshold) if cutoff == "absolute" else None
     if mode == "silhouette":
         radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
         xy64 = xy.detach().double()
@@ -306,29 +326,31 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
             # each group of triangles adds its log(1 - D_j) to its pixels; with several groups, a group's
             # pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all)
             log_empty = log_empty + _checkpointed(len(groups) > 1, _silhouette_group, xy, xy64, radius, lo, hi,
-                                                  W, H, s)
+                                                  W, H, s, x_cut)
         return (-torch.expm1(log_empty)).view(H, W)                         # 1 - Π (1 - D_j), stably
-    near = _nearness(q.detach().double(), camera)                           # (T, 3) z of the corners
-    x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma              # (T,) largest useful x
+    near = _nearness(q.detach().double(), camera, depth)                    # (T, 3) z of the corners
+    # (T,) the largest useful x: relative, a nearer face reaches farther; absolute, D >= threshold only
+    x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma * (x_cut is None)
     pixel, tri, top, z_top = _color_pairs(xy.detach(), near, (x_reach / s).sqrt(), W, H, s, gamma, eps,
-                                          math.log(threshold))
+                                          math.log(threshold), x_cut,
+                                          q.detach().double() if depth == "linear" else None, camera)
     w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
     # the background's term plus every kept pair's w and w c, summed per pixel CHUNK pairs at a time; no
     # per-pair tensor outlives its chunk, in the forward or the backward pass (``_ColorSums``)
     num, den = _ColorSums.apply(w_bg[:, None] * bg, w_bg, xy, q, colors if attr is None else attr, face, tri,
-                                pixel, (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera))
+                                pixel, (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera, depth))
     return (num / den[:, None]).view(H, W, colors.shape[1])              # (H*W, C) / (H*W, 1)
 
 
-def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s):
+def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s, x_cut=None):
     """(H*W,) the sum of log(1 - D_j) over the triangles lo..hi-1 at each pixel: their candidates, then
     ``_silhouette_terms``."""
     pixel, tri = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)       # tri: 0..hi-lo-1
-    log_miss = _silhouette_terms(tri, pixel, xy[lo:hi], W, s)
+    log_miss = _silhouette_terms(tri, pixel, xy[lo:hi], W, s, x_cut)
     return torch.zeros(H * W, dtype=xy.dtype, device=xy.device).index_add(0, pixel, log_miss)
 
 
-def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
+def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr, x_cut=None, q=None, camera=None):
     """Which pairs matter in colour mode, without gradients. xy: (T, 3, 2) detached, in the dtype the
     differentiable pass computes in (so both agree on what is kept); near: (T, 3) float64 corner z;
     radius: (T,) the candidate radius in pixels. Every candidate's log-weight is
@@ -336,6 +358,9 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
     least the background's ε/γ) and ``z_top`` the largest z; a pair is kept if log_w - top >= log_thr.
     Returns pixel (N,), tri (N,) of the kept pairs (grouped by triangle; int32 when the image and the mesh
     allow, half the memory of int64) and top, z_top (H*W,) float64.
+    x_cut: None (the relative cut-off above), or the absolute one: a pair is kept iff its x >= x_cut (its
+    D >= threshold), whatever the other weights. q: None (z is affine on screen: interpolated from ``near``),
+    or (T, 3) float64 corner q, interpolated and then turned into z by ``_nearness(.., camera, "linear")``.
     The differentiable pass takes each weight as ``exp((z - z_top)/γ + logsigmoid(x) - (top - z_top/γ))``:
     nothing of size 1/γ reaches float32.
 
@@ -355,14 +380,20 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr):
             pix, t = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)
             t = t + lo                                                      # the group's → the mesh's ids
             x, b = _pair_terms(xy, t, pix, W, s)                            # as stage B computes them
-            nt = near.index_select(0, t)                                    # (n, 3) float64
-            z = b[0] * nt[:, 0] + b[1] * nt[:, 1] + b[2] * nt[:, 2]         # z is affine in q
+            if q is None:
+                nt = near.index_select(0, t)                                # (n, 3) float64
+                z = b[0] * nt[:, 0] + b[1] * nt[:, 1] + b[2] * nt[:, 2]     # z is affine in q
+            else:
+                qt = q.index_select(0, t)                                   # linear depth: q, then z
+                z = _nearness(b[0] * qt[:, 0] + b[1] * qt[:, 1] + b[2] * qt[:, 2], camera, "linear")
             log_w = torch.nn.functional.logsigmoid(x.double()) + z / gamma
+            if x_cut is not None:                                           # absolute: D < threshold is dropped
+                log_w = torch.where(x.double() >= x_cut, log_w, -math.inf)
             z_top.scatter_reduce_(0, pix, z, reduce="amax")
             top.scatter_reduce_(0, pix, log_w, reduce="amax")
-            ok = log_w - top[pix] >= log_thr                                # the best so far: a lower bound
-            kept.add(pix[ok], t[ok], log_w[ok], top, log_thr)
-        pixel, tri = kept.result(top, log_thr)                              # against the final top
+            ok = (log_w > -math.inf) if x_cut is not None else (log_w - top[pix] >= log_thr)   # relative: the
+            kept.add(pix[ok], t[ok], log_w[ok], top, log_thr if x_cut is None else -math.inf)  # best so far
+        pixel, tri = kept.result(top, log_thr if x_cut is None else -math.inf)   # against the final top
     return pixel, tri, top, z_top
 
 
@@ -426,18 +457,19 @@ class _ColorSums(torch.autograd.Function):
 
     Inputs: bg_num (H*W, C) and bg_den (H*W,), the background's term (where the sums start); xy (T, 3, 2),
     q (T, 3) and colors ((F, C) face colours or (T, 3, C) vertex colours): the differentiable ones; face (T,),
-    tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest: (W, s, gamma, camera), the other arguments
+    tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest: (W, s, gamma, camera, depth), the other arguments
     of ``_color_terms``. Differentiable once (no double backward)."""
 
     @staticmethod
     def forward(ctx, bg_num, bg_den, xy, q, colors, face, tri, pixel, top, z_top, rest):
         ctx.save_for_backward(xy, q, colors, face, tri, pixel, top, z_top)
         ctx.rest = rest
-        W, s, gamma, camera = rest
+        W, s, gamma, camera, depth = rest
         num, den = bg_num.clone(), bg_den.clone()                           # forward runs without a graph
         for lo in range(0, pixel.numel(), CHUNK):
             p = pixel[lo:lo + CHUNK]
-            w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy, q, face, colors, W, s, gamma, top, z_top, camera)
+            w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy, q, face, colors, W, s, gamma, top, z_top, camera,
+                                 depth)
             num.index_add_(0, p, wc)                                        # this chunk's terms, added in place
             den.index_add_(0, p, w)
         return num, den
@@ -446,7 +478,7 @@ class _ColorSums(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_num, g_den):
         xy, q, colors, face, tri, pixel, top, z_top = ctx.saved_tensors
-        W, s, gamma, camera = ctx.rest
+        W, s, gamma, camera, depth = ctx.rest
         need = ctx.needs_input_grad[2:5]                                    # xy, q, colors
         grads = [torch.zeros_like(x) if n else None for x, n in zip((xy, q, colors), need)]
         if any(need):
@@ -457,7 +489,7 @@ class _ColorSums(torch.autograd.Function):
                 for lo in range(0, pixel.numel(), CHUNK):
                     p = pixel[lo:lo + CHUNK]
                     w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy_, q_, face, colors_, W, s, gamma, top, z_top,
-                                         camera)
+                                         camera, depth)
                     # d(sum)/d(term) is 1 at the term's pixel: each pair's gradient is its pixel's
                     part = iter(torch.autograd.grad((w, wc), wrt, (g_den.index_select(0, p),
                                                                    g_num.index_select(0, p))))
@@ -468,18 +500,19 @@ class _ColorSums(torch.autograd.Function):
         return (g_num, g_den, *grads) + (None,) * 6
 
 
-def _silhouette_terms(tri, pixel, xy, W, s):
-    """log(1 - D) of each pair: ``logsigmoid(-δ d² / σ_px)``."""
+def _silhouette_terms(tri, pixel, xy, W, s, x_cut=None):
+    """log(1 - D) of each pair: ``logsigmoid(-δ d² / σ_px)``; 0 (the pair dropped) where x < x_cut, if given."""
     x, _ = _pair_terms(xy, tri, pixel, W, s, bary=False)
-    return torch.nn.functional.logsigmoid(-x)
+    log_miss = torch.nn.functional.logsigmoid(-x)
+    return log_miss if x_cut is None else torch.where(x.detach().double() >= x_cut, log_miss, 0.0)
 
 
-def _color_terms(tri, pixel, xy, q, face, colors, W, s, gamma, top, z_top, camera):
+def _color_terms(tri, pixel, xy, q, face, colors, W, s, gamma, top, z_top, camera, depth="inverse"):
     """Each pair's softmax weight ``D exp((z - z_top)/γ - top)`` (N,) and weighted colour (N, C); colors is
     (F, C) face colours or (T, 3, C) the screen triangles' vertex colours. top, z_top: (H*W,) per pixel."""
     x, b = _pair_terms(xy, tri, pixel, W, s)                                # (N,), 3 × (N,)
     qt = [q[:, k].index_select(0, tri) for k in range(3)]                   # 3 × (N,)
-    z = _nearness(b[0] * qt[0] + b[1] * qt[1] + b[2] * qt[2], camera)       # q is affine on screen
+    z = _nearness(b[0] * qt[0] + b[1] * qt[1] + b[2] * qt[2], camera, depth)   # q is affine on screen
     w = torch.exp(torch.nn.functional.logsigmoid(x) + (z - z_top[pixel]) / gamma - top[pixel])   # <= ~1
     if colors.dim() == 2:
         c = colors[face[tri]]                                               # (N, C) flat colour

@@ -1,24 +1,79 @@
-"""Lecture 08's graded tasks (course/grading/lecture08.py): the references agree with course.soft.soft_rasterize,
-they score full marks, a solution written as a student would scores full marks without calling them, typical
-mistakes lose points with the diagnosis a student can act on, and calling the package scores 0."""
+"""Lecture 08's graded tasks (course/grading/lecture08.py): the references agree with course.nmr.nmr_rasterize
+and course.soft.soft_rasterize, they score full marks, a solution written as a student would scores full marks
+without calling them, typical mistakes lose points with the diagnosis a student can act on, and calling the
+package scores 0."""
+import math
+
 import pytest
 import torch
 
-from course import soft
+from course import nmr, soft
 from course.camera import Camera
 from course.grading import run_check, tasks_for_lecture
 from grading_contract import contract
 from course.grading import lecture08
-from course.grading.lecture08 import soft_blend_reference, soft_coverage_reference, soft_silhouette_reference
+from course.grading.lecture08 import (nmr_edge_gradients_reference, sigma_for_blur_reference, soft_blend_reference,
+                                      soft_coverage_reference)
 from course.mesh import Mesh
 
 # the public references are forbidden to students; these call the same code under its private names
-REFERENCES = {"8.1": lambda tri, *a: lecture08._coverage(tri, *a).to(tri.dtype),
-              "8.2": lambda D: lecture08._silhouette(D).to(D.dtype),
-              "8.3": lambda D, *a: lecture08._blend(D, *a).to(D.dtype)}
+REFERENCES = {"8.1": lambda row, *a: lecture08._nmr_row(row, *a).to(row.dtype),
+              "8.2": lambda tri, *a: lecture08._coverage(tri, *a).to(tri.dtype),
+              "8.3": lambda D, *a: lecture08._blend(D, *a).to(D.dtype),
+              "8.4": lambda *a: lecture08._sigma_for_blur(*a)}
 
 
 # ------------------------------------------------------------------------------ solutions, as students write
+
+def edge_gradients(row, grad, x_left, x_right, color, background, min_step, rule=-1, both=True, floor=True,
+                   across=True, direction="move"):
+    """NMR along one row, a pixel at a time, as a student writes it; the keywords make the typical mistakes."""
+    W = row.shape[0]
+    first, last = math.ceil(x_left - 0.5), math.floor(x_right - 0.5)      # the span's first and last pixels
+    left_colour = row[first - 1] if first >= 1 else background
+    right_colour = row[last + 1] if last + 1 < W else background
+    if not across:
+        left_colour = right_colour = background
+    d_left, d_right = torch.zeros((), dtype=row.dtype), torch.zeros((), dtype=row.dtype)
+
+    def term(j, delta, move, dI):
+        dot = (grad[j] * dI).sum()
+        if (rule == -1 and dot >= 0) or (rule == 1 and dot <= 0):
+            return 0.0
+        step = max(abs(delta), min_step) if floor else abs(delta)
+        if direction == "abs":
+            return dot / step
+        if direction == "clamp":
+            return dot / max(delta, min_step)
+        return dot / (move * step)
+    for j in range(W):
+        u = j + 0.5
+        if u < x_left:
+            d_left = d_left + term(j, u - x_left, -1, color - row[j])
+        elif u > x_right:
+            d_right = d_right + term(j, u - x_right, 1, color - row[j])
+        else:
+            near_left = u - x_left <= x_right - u
+            if both or near_left:
+                d_left = d_left + term(j, u - x_left, 1, left_colour - row[j])
+            if both or not near_left:
+                d_right = d_right + term(j, u - x_right, -1, right_colour - row[j])
+    return torch.stack([d_left, d_right])
+
+
+def nmr_edge_gradients(row, grad, x_left, x_right, color, background, min_step):
+    return edge_gradients(row, grad, x_left, x_right, color, background, min_step)
+
+
+def blur_sigma(width_px, image_width, level, ndc=True, half=True, logit=True):
+    d = width_px / 2 if half else width_px
+    sigma_px = d ** 2 / (math.log((1 - level) / level) if logit else -math.log(level))
+    return 4 * sigma_px / image_width ** 2 if ndc else sigma_px
+
+
+def sigma_for_blur(width_px, image_width, level):
+    return blur_sigma(width_px, image_width, level)
+
 
 def coverage(tri, height, width, sigma, ndc=True, square=True, segments=True, centre=0.5, flip=False,
              winding=0, guard=True):
@@ -49,10 +104,6 @@ def soft_coverage(tri, height, width, sigma):
     return coverage(tri, height, width, sigma)
 
 
-def soft_silhouette(D):
-    return -torch.expm1(torch.log1p(-D).sum(0))
-
-
 def soft_blend(D, z, colors, background, gamma, eps):
     log_w = torch.log(D) + z / gamma                                      # (F, H, W)
     log_b = torch.full_like(log_w[0], eps / gamma)
@@ -62,7 +113,7 @@ def soft_blend(D, z, colors, background, gamma, eps):
     return num / (w.sum(0) + w_b)[..., None]
 
 
-SOLUTIONS = {"8.1": soft_coverage, "8.2": soft_silhouette, "8.3": soft_blend}
+SOLUTIONS = {"8.1": nmr_edge_gradients, "8.2": soft_coverage, "8.3": soft_blend, "8.4": sigma_for_blur}
 
 
 # ------------------------------------------------------------------------------------------ mistakes
@@ -85,21 +136,33 @@ def blend_with(bg_term=True, bg_one=False, sign=1.0, use_D=True, use_z=True, bg_
     return soft_blend
 
 
+def nmr_with(**kw):
+    return lambda *a: edge_gradients(*a, **kw)
+
+
 MISTAKES = [
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, ndc=False), 0, ["normalised device coordinates"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, square=False), 0, ["square the distance"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, flip=True), 0, ["swapped"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, segments=False), 0, ["infinite line"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, centre=0.0), 0, ["(j + 0.5, i + 0.5)"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, winding=1), 1, ["one winding"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s, guard=False), 2, ["zero-length edge"]),
-    ("8.1", lambda t, h, w, s: coverage(t, h, w, s).T, 0, ["shape (12, 20) expected"]),
-    ("8.1", lambda t, h, w, s: coverage(t.double(), h, w, s), 2, ["keep the input's dtype"]),
-    ("8.2", lambda D: 1 - torch.prod(1 - D, 0), 2, ["loses faint coverage", "log1p"]),
-    ("8.2", lambda D: 1 - torch.exp(torch.log(1 - D).sum(0)), 2, ["loses faint coverage"]),
-    ("8.2", lambda D: torch.prod(1 - D, 0), 0, ["*no* face covers the pixel"]),
-    ("8.2", lambda D: D.sum(0).clamp(max=1), 1, ["not a probability"]),
-    ("8.2", lambda D: D.amax(0), 0, ["largest D_j"]),
+    ("8.1", nmr_with(rule=0), 0, ["sign rule is missing"]),
+    ("8.1", nmr_with(rule=1), 0, ["wrong way round"]),
+    ("8.1", nmr_with(both=False), 0, ["either edge"]),
+    ("8.1", nmr_with(across=False), 2, ["across the edge"]),
+    ("8.1", nmr_with(direction="abs"), 0, ["δx has a sign"]),
+    ("8.1", nmr_with(direction="clamp"), 0, ["keep the move's sign"]),
+    ("8.1", nmr_with(floor=False), 4, ["floor |δ| at min_step"]),
+    ("8.1", lambda *a: lecture08._nmr_row(*a, direction="sign"), 4, ["direction of the move"]),
+    ("8.1", lambda *a: lecture08._nmr_row(*a, centre=0.0), 0, ["j + 0.5"]),
+    ("8.4", lambda *a: blur_sigma(*a, ndc=False), 0, ["σ_px", "NDC"]),
+    ("8.4", lambda *a: blur_sigma(*a, half=False), 0, ["both sides of the edge"]),
+    ("8.4", lambda *a: blur_sigma(*a, logit=False), 0, ["ln((1 − level) / level)"]),
+    ("8.4", lambda *a: 2.07e-5, 0, ["expected"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, ndc=False), 0, ["normalised device coordinates"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, square=False), 0, ["square the distance"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, flip=True), 0, ["swapped"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, segments=False), 0, ["infinite line"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, centre=0.0), 0, ["(j + 0.5, i + 0.5)"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, winding=1), 1, ["one winding"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s, guard=False), 2, ["zero-length edge"]),
+    ("8.2", lambda t, h, w, s: coverage(t, h, w, s).T, 0, ["shape (12, 20) expected"]),
+    ("8.2", lambda t, h, w, s: coverage(t.double(), h, w, s), 2, ["keep the input's dtype"]),
     ("8.3", naive_blend, 2, ["overflows", "log-weights"]),
     ("8.3", blend_with(bg_in_max=False), 2, ["background's included"]),
     ("8.3", blend_with(bg_term=False), 1, ["background is missing"]),
@@ -110,9 +173,10 @@ MISTAKES = [
 ]
 
 
-def test_lecture_08_has_three_tasks_of_three_points_each():
+def test_lecture_08_has_four_tasks_with_points_by_difficulty():
     assert [(t.id, t.name, t.points) for t in tasks_for_lecture(8)] == [
-        ("8.1", "soft_coverage", 3), ("8.2", "soft_silhouette", 3), ("8.3", "soft_blend", 3)]
+        ("8.1", "nmr_edge_gradients", 5), ("8.2", "soft_coverage", 3), ("8.3", "soft_blend", 3),
+        ("8.4", "sigma_for_blur", 2)]
     assert {task for task, *_ in MISTAKES} == set(REFERENCES)
 
 
@@ -141,7 +205,7 @@ def test_the_coverage_and_silhouette_references_agree_with_soft_rasterize(sigma)
     D = torch.stack([soft_coverage_reference(t, 14, 20, sigma) for t in tris])
     assert torch.allclose(image, D[0], atol=2 * thr, rtol=1e-12)
     image = soft.soft_rasterize(mesh, camera, sigma=sigma, threshold=thr, cull_backfaces=False)
-    assert torch.allclose(image, soft_silhouette_reference(D), atol=4 * thr, rtol=1e-12)
+    assert torch.allclose(image, -torch.expm1(torch.log1p(-D).sum(0)), atol=4 * thr, rtol=1e-12)   # the OR
     assert 0.2 < float(image.mean()) < 0.8
 
 
@@ -162,9 +226,43 @@ def test_the_blend_reference_agrees_with_soft_rasterize(gamma):
     assert torch.allclose(image, expected, atol=1e-9, rtol=1e-9)
 
 
+@pytest.mark.parametrize("x_left, x_right", [(3.0, 11.0), (0.0, 7.0), (5.0, 16.0)])
+def test_the_nmr_reference_agrees_with_nmr_rasterize(x_left, x_right):
+    """One image row: a triangle whose left edge a→b is vertical at x_left and whose edge c→a crosses the row at
+    x_right, c far above. Moving the whole triangle moves both crossings
+    (∂L/∂tx = ∂L/∂x_left + ∂L/∂x_right); moving c alone moves the right crossing by c's weight there. Crossings on whole numbers keep every pixel
+    centre at least min_step = 0.5 from them, where the package's floor per vertex is the task's per crossing."""
+    f64 = torch.float64
+    W = 16
+    camera = Camera(torch.eye(3, dtype=f64), torch.eye(3, dtype=f64), torch.zeros(3, dtype=f64), width=W, height=1,
+                    near=0.0, far=10.0, orthographic=True)
+    w_c = 50.5 / 200                                                      # c's weight on the row y = 0.5
+    verts = torch.tensor([[x_left, -50.0, 2.0], [x_left, 50.0, 2.0], [x_left + (x_right - x_left) / w_c, 150.0, 2.0]],
+                         dtype=f64, requires_grad=True)
+    colour, bg = torch.tensor([[0.9, 0.2, 0.4]], dtype=f64), torch.tensor([0.1, 0.5, 0.3], dtype=f64)
+    grad = torch.randn(1, W, 3, generator=torch.Generator().manual_seed(int(x_left)), dtype=f64)
+    image = nmr.nmr_rasterize(Mesh(verts, torch.tensor([[0, 1, 2]])), camera, face_colors=colour, background=bg,
+                              cull_backfaces=False)
+    (image * grad).sum().backward()
+    expected = nmr_edge_gradients_reference(image[0].detach(), grad[0], x_left, x_right, colour[0], bg, 0.5)
+    assert expected.abs().min() > 1e-3                                     # both edges get a gradient
+    assert torch.allclose(verts.grad[:, 0].sum(), expected.sum(), atol=1e-12)
+    assert torch.allclose(verts.grad[2, 0] / w_c, expected[1], atol=1e-12)
+
+
+def test_the_blur_reference_gives_the_width_it_was_asked_for():
+    """The σ of 8.4, put into the soft coverage of a half-plane (a huge triangle), gives D = 95 % and 5 % at
+    width / 2 inside and outside the edge."""
+    sigma = sigma_for_blur_reference(4.0, 64, 0.05)
+    tri = torch.tensor([[30.5, -1e4], [30.5, 1e4], [-2e4, 0.0]], dtype=torch.float64)   # inside: x < 30.5
+    D = soft_coverage_reference(tri, 1, 64, sigma)[0]                     # centres 28.5 and 32.5: 2 px away
+    assert math.isclose(float(D[28]), 0.95, rel_tol=1e-9) and math.isclose(float(D[32]), 0.05, rel_tol=1e-9)
+
+
 CALLING_THE_PACKAGE = {
-    "8.1": lambda tri, h, w, s: soft.soft_rasterize(None, None, sigma=s),
-    "8.2": lambda D: soft.soft_rasterize(D, None),
+    "8.1": lambda row, grad, xl, xr, c, b, m: nmr.nmr_image(row, None, None, None),
+    "8.2": lambda tri, h, w, s: soft.soft_rasterize(None, None, sigma=s),
+    "8.4": lambda width, size, level: soft.soft_rasterize(None, None, sigma=width),
 }
 
 

@@ -44,9 +44,11 @@ def small_sphere(dtype=torch.float32):
 
 # ------------------------------------------------------------------------------------- a dense oracle
 
-def dense_soft(mesh, camera, sigma, gamma, eps=1e-3, face_colors=None, vertex_colors=None, bg=0.0):
+def dense_soft(mesh, camera, sigma, gamma, eps=1e-3, face_colors=None, vertex_colors=None, bg=0.0, cut=None,
+               z_of="inverse"):
     """The paper's formulas for every (pixel, face), no culling, float64: the reference soft_rasterize
-    must match (faces all in front of the near plane, no back-face culling)."""
+    must match (faces all in front of the near plane, no back-face culling). cut: None, or drop the pairs
+    with D < cut (the absolute cut-off); z_of: "inverse" or "linear" depth (z = (far - depth) / (far - near))."""
     W, H = camera.width, camera.height
     xy, depth = camera.project(mesh.verts)
     tri = xy[mesh.faces].double()                                          # (F, 3, 2)
@@ -66,13 +68,18 @@ def dense_soft(mesh, camera, sigma, gamma, eps=1e-3, face_colors=None, vertex_co
     inside = (bary > 0).all(-1)
     x = torch.where(inside, d2, -d2) / (sigma * W * W / 4)                 # d_ndc = 2 d_px / W
     D = torch.sigmoid(x)
+    if cut is not None:
+        D = torch.where(D < cut, 0.0, D)
     if face_colors is None and vertex_colors is None:
         return (1 - (1 - D).prod(1)).view(H, W)
     b = bary.clamp(0, 1)
     b = b / b.sum(-1, keepdim=True)
     qp = (b * q[None]).sum(-1)
     n, f = camera.near, camera.far
-    z = (f - qp) / (f - n) if camera.orthographic else (qp - 1 / f) / (1 / n - 1 / f)
+    if camera.orthographic or z_of == "linear":
+        z = (f - (qp if camera.orthographic else 1 / qp)) / (f - n)
+    else:
+        z = (qp - 1 / f) / (1 / n - 1 / f)
     w = D * torch.exp(z / gamma)                                           # (P, F): fine for moderate γ
     w_bg = math.exp(eps / gamma)
     if face_colors is not None:
@@ -101,6 +108,63 @@ def test_matches_the_dense_formulas(camera):
         assert torch.allclose(img, ref, atol=1e-10)
         img = soft_rasterize(mesh, camera, mode="color", gamma=gamma, vertex_colors=vc, **kw)
         assert torch.allclose(img, dense_soft(mesh, camera, 3e-3, gamma, vertex_colors=vc), atol=1e-10)
+
+
+@pytest.mark.parametrize("camera", [persp(), ortho8(12, 10)], ids=["perspective", "orthographic"])
+def test_the_absolute_cutoff_drops_exactly_the_pairs_below_the_threshold(camera):
+    """cutoff="absolute" (the reference SoftRas code's): the dense formulas with every D < threshold set to 0,
+    in silhouette and colour modes; unlike the relative cut-off, it changes the image at tiny γ."""
+    mesh = two_triangles() if not camera.orthographic else screen_mesh(
+        [(1.3, 1.2), (10.1, 2.4), (2.2, 8.7), (5.5, 0.5), (11.0, 9.0), (3.0, 6.0)], [[0, 1, 2], [3, 4, 5]],
+        z=[0.0, 0.0, 0.0, 1.0, 1.5, 1.2])
+    fc = torch.tensor([[0.9, 0.2, 0.1], [0.1, 0.3, 0.8]], dtype=torch.float64)
+    sigma, thr = 3e-2, 1e-2
+    kw = dict(sigma=sigma, threshold=thr, cull_backfaces=False, cutoff="absolute")
+    sil = soft_rasterize(mesh, camera, **kw)
+    assert torch.allclose(sil, dense_soft(mesh, camera, sigma, 1.0, cut=thr), atol=1e-12)
+    assert not torch.allclose(sil, dense_soft(mesh, camera, sigma, 1.0), atol=1e-4)   # some pairs are cut
+    for gamma in (0.5, 1e-2):
+        img = soft_rasterize(mesh, camera, mode="color", gamma=gamma, face_colors=fc, background=0.25, **kw)
+        assert torch.allclose(img, dense_soft(mesh, camera, sigma, gamma, face_colors=fc, bg=0.25, cut=thr),
+                              atol=1e-12)
+    rel = soft_rasterize(mesh, camera, mode="color", gamma=1e-2, face_colors=fc, background=0.25,
+                         **dict(kw, cutoff="relative"))
+    assert (rel - img).abs().max() > 0.1                                   # the relative cut keeps the far pairs
+
+
+@pytest.mark.parametrize("vertex", [False, True], ids=["face colours", "vertex colours"])
+def test_linear_depth_matches_the_dense_formulas(vertex):
+    """depth="linear": z = (far - depth) / (far - near) with the perspective-correct depth at the pixel, as in
+    the reference SoftRas code and PyTorch3D; it differs from the default inverse depth."""
+    mesh, camera = two_triangles(), persp()
+    colours = dict(vertex_colors=torch.rand(6, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+                   ) if vertex else dict(face_colors=torch.tensor([[0.9, 0.2, 0.1], [0.1, 0.3, 0.8]],
+                                                                  dtype=torch.float64))
+    for gamma in (0.05, 0.005):
+        img = soft_rasterize(mesh, camera, mode="color", sigma=3e-3, gamma=gamma, threshold=1e-14,
+                             cull_backfaces=False, depth="linear", **colours)
+        ref = dense_soft(mesh, camera, 3e-3, gamma, z_of="linear", **colours)
+        assert torch.allclose(img, ref, atol=1e-10)
+        inverse = dense_soft(mesh, camera, 3e-3, gamma, **colours)
+        assert (img - inverse).abs().max() > 1e-3
+    cut = soft_rasterize(mesh, camera, mode="color", sigma=3e-3, gamma=0.005, threshold=1e-3, cull_backfaces=False,
+                         depth="linear", cutoff="absolute", **colours)
+    assert torch.allclose(cut, dense_soft(mesh, camera, 3e-3, 0.005, z_of="linear", cut=1e-3, **colours),
+                          atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("cutoff, depth", [("absolute", "inverse"), ("relative", "linear"), ("absolute", "linear")])
+def test_the_reference_options_give_finite_gradients(dtype, cutoff, depth):
+    mesh, camera = small_sphere(dtype), persp(24, dtype=dtype)
+    verts = mesh.verts.clone().requires_grad_()
+    colours = torch.rand(mesh.faces.shape[0], 3, generator=torch.Generator().manual_seed(3), dtype=dtype)
+    for mode, kw in (("silhouette", {}), ("color", dict(face_colors=colours, gamma=1e-4))):
+        image = soft_rasterize(Mesh(verts, mesh.faces), camera, mode=mode, sigma=1e-3, cutoff=cutoff, depth=depth,
+                               **kw)
+        grad, = torch.autograd.grad((image * torch.linspace(-1, 1, image.numel(), dtype=dtype).view(image.shape)).sum(),
+                                    verts)
+        assert torch.isfinite(image).all() and torch.isfinite(grad).all() and grad.abs().sum() > 0
 
 
 def test_culling_error_stays_bounded_as_gamma_shrinks():
@@ -623,6 +687,8 @@ NAN, INF = float("nan"), float("inf")
     (dict(threshold=NAN), "threshold"), (dict(threshold="small"), "threshold"),
     (dict(eps=NAN), "eps"), (dict(eps=-0.1), "eps"),
     (dict(mode=None), "mode"), (dict(cull_backfaces="no"), "cull_backfaces"),
+    (dict(cutoff="abs"), "cutoff"), (dict(cutoff=None), "cutoff"), (dict(depth="log"), "depth"),
+    (dict(mode="color", depth=1), "depth"),
 ])
 def test_soft_rasterize_refuses_bad_input(kw, match):
     if kw.get("mode") == "color" and "face_colors" not in kw and "vertex_colors" not in kw:

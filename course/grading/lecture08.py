@@ -1,30 +1,39 @@
-"""The checks of lecture 8's graded tasks (differentiable rasterization): 8.1 soft_coverage, 8.2
-soft_silhouette, 8.3 soft_blend.
+"""The checks of lecture 8's graded tasks (differentiable rasterization): 8.1 nmr_edge_gradients (NMR's
+approximate gradient along a row, both edges, the sign rule), 8.2 soft_coverage, 8.3 soft_blend, 8.4
+sigma_for_blur (an analysis: the σ that blurs an edge over a given width).
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``.
 
-``course.soft.soft_rasterize`` computes all three inline, on (pixel, face) pairs and from logits, so the
-references are written here from the formulas of Liu et al. 2019 (as ``course/soft.py`` states them), on
-dense (F, H, W) tensors and in float64; ``tests/test_grading_08.py`` checks that they agree with
+``course.soft.soft_rasterize`` computes 8.2 and 8.3 inline, on (pixel, face) pairs and from logits, and
+``course.nmr`` computes 8.1 per vertex over a whole image, so the references are written here from the
+formulas of Kato et al. 2018 and Liu et al. 2019 (as ``course/nmr.py`` and ``course/soft.py`` state them), on
+dense tensors and in float64; ``tests/test_grading_08.py`` checks that they agree with ``nmr_rasterize`` and
 ``soft_rasterize`` on small scenes. They are public so that those tests (and a curious student) can read
 them; a graded function that calls them, or the package functions doing the task's work, scores 0.
 """
 from __future__ import annotations
 
+import math
+
 import torch
 
-from .helpers import _call, _close, compare, generator, grade_parts, require, to_tensor
+from .helpers import Fail, _call, _close, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
-__all__ = ["soft_coverage_reference", "soft_silhouette_reference", "soft_blend_reference"]
+__all__ = ["nmr_edge_gradients_reference", "soft_coverage_reference", "soft_blend_reference",
+           "sigma_for_blur_reference"]
 
 FORBIDDEN = [("course.soft", "soft_rasterize"), ("course.soft", "_pair_terms"),
              ("course.soft", "_silhouette_terms"), ("course.soft", "_color_terms"),
+             ("course.grading.lecture08", "nmr_edge_gradients_reference"),
              ("course.grading.lecture08", "soft_coverage_reference"),
-             ("course.grading.lecture08", "soft_silhouette_reference"),
-             ("course.grading.lecture08", "soft_blend_reference")]
+             ("course.grading.lecture08", "soft_blend_reference"),
+             ("course.grading.lecture08", "sigma_for_blur_reference")]
+FORBIDDEN_NMR = FORBIDDEN + [("course.nmr", "nmr_rasterize"), ("course.nmr", "nmr_image"),
+                             ("course.nmr", "_nmr_backward"), ("course.nmr", "_nmr_scan"),
+                             ("course.nmr", "_nmr_pixels")]
 
 
 # ------------------------------------------------------------------------------------- the references
@@ -53,14 +62,20 @@ def _signed_d2(tri, height, width, segments=True, winding=0):
     return torch.where(inside, d2, -d2)
 
 
+def nmr_edge_gradients_reference(row, grad, x_left: float, x_right: float, color, background,
+                                 min_step: float) -> torch.Tensor:
+    """8.1, in row's dtype (computed in float64): see ``_nmr_row``."""
+    return _nmr_row(row, grad, x_left, x_right, color, background, min_step).to(row.dtype)
+
+
+def sigma_for_blur_reference(width_px: float, image_width: int, level: float) -> float:
+    """8.4: see ``_sigma_for_blur``."""
+    return _sigma_for_blur(width_px, image_width, level)
+
+
 def soft_coverage_reference(tri, height: int, width: int, sigma: float) -> torch.Tensor:
-    """8.1, in tri's dtype (computed in float64): see ``_coverage``."""
+    """8.2, in tri's dtype (computed in float64): see ``_coverage``."""
     return _coverage(tri, height, width, sigma).to(tri.dtype)
-
-
-def soft_silhouette_reference(D) -> torch.Tensor:
-    """8.2, in D's dtype (computed in float64): see ``_silhouette``."""
-    return _silhouette(D).to(D.dtype)
 
 
 def soft_blend_reference(D, z, colors, background, gamma: float, eps: float) -> torch.Tensor:
@@ -69,15 +84,9 @@ def soft_blend_reference(D, z, colors, background, gamma: float, eps: float) -> 
 
 
 def _coverage(tri, height: int, width: int, sigma: float) -> torch.Tensor:
-    """8.1: ``D = sigmoid(δ d² / σ)`` (H, W) float64 at the pixel centres (j + 0.5, i + 0.5), for the
+    """8.2: ``D = sigmoid(δ d² / σ)`` (H, W) float64 at the pixel centres (j + 0.5, i + 0.5), for the
     triangle tri (3, 2) in pixels; d in normalised device coordinates, ``d_ndc = 2 d_px / width``."""
     return torch.sigmoid(_signed_d2(tri, height, width) * (4.0 / (width * width)) / sigma)
-
-
-def _silhouette(D) -> torch.Tensor:
-    """8.2: the probabilistic OR ``1 - Π_j (1 - D_j)`` (H, W) of D (F, H, W), float64, as
-    ``-expm1(Σ_j log1p(-D_j))`` so that faint coverage (D ~ 1e-9) is not rounded away."""
-    return -torch.expm1(torch.log1p(-D.to(torch.float64)).sum(0))
 
 
 def _blend(D, z, colors, background, gamma: float, eps: float) -> torch.Tensor:
@@ -93,6 +102,55 @@ def _blend(D, z, colors, background, gamma: float, eps: float) -> torch.Tensor:
     return num / (w.sum(0) + w_b)[..., None]
 
 
+def _nmr_row(row, grad, x_left, x_right, color, background, min_step, *, rule="lower", both=True, floor=True,
+             across=True, centre=0.5, direction="move"):
+    """8.1: NMR's approximate gradient (2,) float64 ``[∂L/∂x_left, ∂L/∂x_right]`` of one image row (W, C)
+    w.r.t. where a face's left and right edges cross the row, for ∂L/∂I ``grad`` (W, C) (Kato et al. 2018).
+
+    The face covers the pixel centres u = j + 0.5 with x_left <= u <= x_right and is in front of everything.
+    A pixel left of the span is covered by moving the left edge left by |δ| (δ = u - x_left), one right of it by
+    moving the right edge right; δI = color - row[j]. A pixel inside is uncovered by moving the left edge
+    right past it (δ = u - x_left) *and* by moving the right edge left past it (δ = u - x_right): two terms,
+    δI = the colour across that edge (the row's pixel just outside the span, ``background`` beyond the border)
+    - row[j]. Each term is ``grad[j] · δI / δx`` with δx = ± max(|δ|, min_step), the sign of the move, and is
+    kept only where ``grad[j] · δI < 0`` (the sign rule). The keywords give the typical mistakes: ``rule``
+    "all" / "raise" (no sign rule / the opposite one), ``both`` False (inside: the nearer edge only), ``floor``
+    False, ``across`` False (uncovering shows the background), ``centre`` 0 (centres at j), ``direction``
+    "sign" (the sign of δ: 0, and an infinite term, on a centre), "abs" (|δx|, no sign) or "clamp" (δ clamped
+    below at min_step)."""
+    row, grad, color, background = (v.to(torch.float64) for v in (row, grad, color, background))
+    W = row.shape[0]
+    u = torch.arange(W, dtype=torch.float64) + centre                     # (W,) pixel centres
+    inside = (u >= x_left) & (u <= x_right)
+    jl, jr = math.ceil(x_left - centre) - 1, math.floor(x_right - centre) + 1   # just outside the span
+    behind_l = row[jl] if across and 0 <= jl < W else background          # (C,) across the left edge
+    behind_r = row[jr] if across and 0 <= jr < W else background
+    nearer_left = (u - x_left) <= (x_right - u)
+    terms = [(0, u < x_left, u - x_left, -1.0, color - row),              # left edge moves left: covers
+             (1, u > x_right, u - x_right, 1.0, color - row),             # right edge moves right: covers
+             (0, inside & (both | nearer_left), u - x_left, 1.0, behind_l - row),       # moves right: uncovers
+             (1, inside & (both | ~nearer_left), u - x_right, -1.0, behind_r - row)]    # moves left: uncovers
+    out = torch.zeros(2, dtype=torch.float64)
+    for edge, mask, delta, move, dI in terms:
+        dot = (grad * dI).sum(-1)                                         # (W,) δᴾ · δI
+        keep = mask & {"lower": dot < 0, "all": torch.ones_like(mask), "raise": dot > 0}[rule]
+        step = delta.abs().clamp(min=min_step) if floor else delta.abs()
+        dx = {"move": move * step, "sign": torch.sign(delta) * step, "abs": step,
+              "clamp": delta.clamp(min=min_step)}[direction]
+        out[edge] += torch.where(keep, dot / dx, torch.zeros_like(dot)).sum()
+    return out
+
+
+def _sigma_for_blur(width_px, image_width, level, *, ndc=True, half=True, logit=True, square=True):
+    """8.4: the σ (NDC) at which D = sigmoid(δ d² / σ) rises from ``level`` to ``1 - level`` across
+    ``width_px`` pixels: D = level at d = width / 2 outside, so σ_px = (width / 2)² / ln((1 - level) / level),
+    and σ = σ_px · 4 / image_width². The keywords give the typical mistakes."""
+    d = width_px / 2 if half else width_px
+    x = math.log((1 - level) / level) if logit else math.log(1 / level)
+    sigma_px = (d * d if square else d) / x
+    return sigma_px * 4 / image_width ** 2 if ndc else sigma_px
+
+
 def _match(got, variants):
     """The explanation of the first ``(alternative, explanation)`` that ``got`` matches, else None."""
     for alternative, explanation in variants:
@@ -101,7 +159,93 @@ def _match(got, variants):
     return None
 
 
-# ------------------------------------------------------------------------------------ 8.1 soft coverage
+# ---------------------------------------------------------------------- 8.1 NMR's gradient along a row
+
+def _nmr_problem(impl, row, grad, x_left, x_right, color, background, min_step, label) -> str | None:
+    name = f"nmr_edge_gradients({label})"
+    expected = _nmr_row(row, grad, x_left, x_right, color, background, min_step)
+    got = to_tensor(_call(impl, row, grad, x_left, x_right, color, background, min_step), name)
+    message = compare(got, expected.to(row.dtype), name=name, check_dtype=True, atol=1e-9, rtol=1e-9)
+    if message is None or "shape" in message or "dtype" in message:
+        return message
+    if not bool(torch.isfinite(got).all()):
+        return (f"{name}: not finite: a pixel centre on an edge has δ = 0; floor |δ| at min_step, and take the "
+                "direction of the move from the edge and the side (cover or uncover), not from the sign of δ")
+    ref = lambda **kw: _nmr_row(row, grad, x_left, x_right, color, background, min_step, **kw)  # noqa: E731
+    explanation = _match(got, [
+        (ref(rule="all"), "the sign rule is missing: keep a term only where ∂L/∂I · δI < 0 (moving the edge that "
+                          "way would lower the loss)"),
+        (ref(rule="raise"), "the sign rule is the wrong way round: keep the terms with ∂L/∂I · δI < 0, those "
+                            "whose move lowers the loss"),
+        (ref(both=False), "a pixel inside the span can be uncovered by either edge: add both terms (the left edge "
+                          "moving right past it and the right edge moving left past it), not only the nearer one"),
+        (ref(across=False), "uncovering a pixel shows what lies across the edge (the row's pixel just outside "
+                            "the span), not the background, unless the span reaches the border"),
+        (ref(direction="abs"), "δx has a sign: the left edge moves left (−) to cover and right (+) to uncover, "
+                               "the right edge the opposite way; divide by the signed move"),
+        (ref(direction="clamp"), "the floor must keep the move's sign: δx = ± max(|δ|, min_step), not "
+                                 "max(δ, min_step)"),
+        (ref(centre=0.0), "the pixel centres are at j + 0.5, not j"),
+    ])
+    if explanation is None and _close(got, ref(floor=False)):
+        explanation = "|δx| must be floored at min_step: use max(|δ|, min_step)"
+    return f"{name}: {explanation}" if explanation else message
+
+
+def _nmr_inputs(seed, W, C, x_left, x_right, inside_value=None):
+    """A row (W, C) with the face's colour over its span and other surfaces elsewhere, the face's colour
+    (C,), a background (C,) and a random ∂L/∂I (W, C) of both signs, float64."""
+    g = generator(seed)
+    r = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)     # noqa: E731
+    color, background = r(C), r(C)
+    row = r(W, C)                                                          # other surfaces
+    u = torch.arange(W, dtype=torch.float64) + 0.5
+    span = (u >= x_left) & (u <= x_right)
+    row[span] = color if inside_value is None else inside_value
+    grad = torch.randn(W, C, generator=g, dtype=torch.float64)
+    return row, grad, color, background
+
+
+@task("8.1", "nmr_edge_gradients", points=5, reference=("course.nmr", "nmr_image"))
+def _check_nmr_edge_gradients(impl):
+    forbidden = forbidden_call(impl, "nmr_edge_gradients", FORBIDDEN_NMR)
+    if forbidden:
+        return 0, forbidden
+
+    def silhouette():
+        for seed, (xl, xr) in ((91, (5.3, 13.8)), (92, (2.7, 9.1))):
+            row, grad, _, _ = _nmr_inputs(seed, 16, 1, xl, xr)
+            row = ((torch.arange(16) + 0.5 >= xl) & (torch.arange(16) + 0.5 <= xr)).double()[:, None]
+            one, zero = torch.ones(1, dtype=torch.float64), torch.zeros(1, dtype=torch.float64)
+            require(_nmr_problem(impl, row, grad, xl, xr, one, zero, 0.1,
+                                 f"a silhouette row, span [{xl}, {xr}], W = 16, min_step = 0.1"))
+
+    def colours():
+        row, grad, color, bg = _nmr_inputs(93, 20, 3, 6.4, 15.2)
+        require(_nmr_problem(impl, row, grad, 6.4, 15.2, color, bg, 0.1,
+                             "colours, span [6.4, 15.2], W = 20, min_step = 0.1"))
+        row, grad, color, bg = _nmr_inputs(94, 12, 3, 0.2, 7.7, inside_value=None)
+        require(_nmr_problem(impl, row, grad, 0.2, 7.7, color, bg, 0.1,
+                             "colours, span [0.2, 7.7] from the image's left border, W = 12, min_step = 0.1"))
+        row, grad, color, bg = _nmr_inputs(95, 12, 2, 4.6, 11.9)
+        require(_nmr_problem(impl, row, grad, 4.6, 11.9, color, bg, 0.1,
+                             "two channels, span [4.6, 11.9] to the right border, W = 12, min_step = 0.1"))
+
+    def near_centres():
+        row, grad, color, bg = _nmr_inputs(96, 16, 3, 4.5, 10.3)
+        grad[4] = row[4] - row[3]                  # pixel 4's centre is on the left edge: uncovering it helps
+        require(_nmr_problem(impl, row, grad, 4.5, 10.3, color, bg, 0.5,
+                             "the left edge on a pixel centre, the right edge 0.2 from one, min_step = 0.5"))
+        row, grad, color, bg = _nmr_inputs(97, 16, 3, 3.9, 12.5)
+        grad[12] = row[12] - row[13]               # pixel 12's centre is on the right edge
+        require(_nmr_problem(impl, row, grad, 3.9, 12.5, color, bg, 1.5, "min_step = 1.5, the right edge on a "
+                                                                          "pixel centre"))
+    return grade_parts((2, "a silhouette row: covering and uncovering", silhouette),
+                       (2, "colours, other surfaces across the edges, the image border", colours),
+                       (1, "edges on and near pixel centres: the floor and the direction", near_centres))
+
+
+# ------------------------------------------------------------------------------------ 8.2 soft coverage
 
 def _coverage_problem(impl, tri, height, width, sigma, label) -> str | None:
     name = f"soft_coverage({label})"
@@ -147,7 +291,7 @@ def _random_triangle(seed, width, height, dtype):
     return tri.to(dtype)
 
 
-@task("8.1", "soft_coverage", points=3, reference=("course.soft", "soft_rasterize"))
+@task("8.2", "soft_coverage", points=3, reference=("course.soft", "soft_rasterize"))
 def _check_soft_coverage(impl):
     forbidden = forbidden_call(impl, "soft_coverage", FORBIDDEN)
     if forbidden:
@@ -174,64 +318,6 @@ def _check_soft_coverage(impl):
     return grade_parts((1, "random triangles, float32", random),
                        (1, "both windings and a sliver", windings),
                        (1, "tiny and large σ, a degenerate triangle", stress))
-
-
-# ------------------------------------------------------------------------------- 8.2 probabilistic OR
-
-def _silhouette_problem(impl, D, label, faint=False) -> str | None:
-    name = f"soft_silhouette({label})"
-    expected = _silhouette(D)
-    got = to_tensor(_call(impl, D), name)
-    tol = dict(atol=1e-30, rtol=1e-4) if faint else ({} if D.dtype == torch.float32 else dict(atol=1e-12, rtol=1e-9))
-    message = compare(got, expected.to(D.dtype), name=name, check_dtype=True, **tol)
-    if message is None or "shape" in message or "dtype" in message:
-        return message
-    if faint and float((got.to(torch.float64) - expected).abs().max()) <= 4 * D.shape[0] * torch.finfo(D.dtype).eps:
-        # right to within the rounding of numbers near 1, not to the relative precision of the faint values
-        return (f"{name}: 1 − Π(1 − D) loses faint coverage: 1 − D rounds to 1 once D is below the "
-                "dtype's precision (6e-8 in float32, 1e-16 in float64); sum log1p(−D_j) and return −expm1 of the sum")
-    d = D.to(torch.float64)
-    explanation = _match(got, [
-        (torch.prod(1 - d, 0), "that is Π(1 − D_j), the probability that *no* face covers the pixel: "
-                               "return 1 minus it"),
-        (d.sum(0).clamp(max=1), "the sum of the D_j (clamped) is not a probability: combine them as "
-                                "1 − Π(1 − D_j) (a pixel is empty only if every face misses it)"),
-        (d.amax(0), "the largest D_j ignores the other faces: combine them as 1 − Π(1 − D_j)"),
-        (torch.prod(d, 0), "Π D_j is the probability that *every* face covers the pixel: the silhouette is "
-                           "1 − Π(1 − D_j)"),
-        (d.mean(0), "the mean of the D_j is not the probabilistic OR: 1 − Π(1 − D_j)"),
-    ])
-    return f"{name}: {explanation}" if explanation else message
-
-
-@task("8.2", "soft_silhouette", points=3, reference=("course.soft", "soft_rasterize"))
-def _check_soft_silhouette(impl):
-    forbidden = forbidden_call(impl, "soft_silhouette", FORBIDDEN)
-    if forbidden:
-        return 0, forbidden
-
-    def random():
-        D = torch.rand(5, 6, 7, generator=generator(83), dtype=torch.float64) ** 3
-        require(_silhouette_problem(impl, D.float(), "5 faces, 6 × 7, float32"))
-        require(_silhouette_problem(impl, D, "5 faces, 6 × 7, float64"))
-
-    def saturated():
-        D = torch.rand(4, 5, 5, generator=generator(84), dtype=torch.float64)
-        D[0, :2] = 1.0                                                     # surely covered
-        D[:, 4] = 0.0                                                      # surely empty
-        D[1:, 2] = torch.tensor([1e-3, 1 - 1e-9, 0.5])[:, None]
-        require(_silhouette_problem(impl, D.float(), "D exactly 0 and 1, float32"))
-        require(_silhouette_problem(impl, D, "D exactly 0 and 1, float64"))
-        require(_silhouette_problem(impl, D[:1], "a single face, float64"))
-
-    def faint():
-        g = generator(85)
-        D = 10 ** (-7 - 5 * torch.rand(6, 4, 8, generator=g, dtype=torch.float64))   # 1e-12 .. 1e-7
-        require(_silhouette_problem(impl, D.float(), "faint coverage D ~ 1e-12 .. 1e-7, float32", faint=True))
-        require(_silhouette_problem(impl, D * 1e-8, "faint coverage D ~ 1e-20 .. 1e-15, float64", faint=True))
-    return grade_parts((1, "random coverages", random),
-                       (1, "coverage exactly 0 and 1, one face", saturated),
-                       (1, "faint coverage far from every face (precision)", faint))
 
 
 # ------------------------------------------------------------------------------ 8.3 softmax blending
@@ -313,3 +399,52 @@ def _check_soft_blend(impl):
     return grade_parts((1, "moderate γ", moderate),
                        (1, "tiny γ: overflow of exp(z / γ)", tiny),
                        (1, "pixels no face covers, large γ", limits))
+
+
+# ---------------------------------------------------------------------- 8.4 analysis: σ for a blur width
+
+def _as_number(x, name) -> float:
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        return float(x)
+    t = to_tensor(x, name)
+    if t.numel() != 1:
+        raise Fail(f"{name}: expected one number, got shape {tuple(t.shape)}")
+    return float(t.reshape(()))
+
+
+def _sigma_problem(impl, width_px, image_width, level) -> str | None:
+    name = f"sigma_for_blur({width_px}, {image_width}, {level})"
+    expected = _sigma_for_blur(width_px, image_width, level)
+    got = _as_number(_call(impl, width_px, image_width, level), name)
+    if math.isclose(got, expected, rel_tol=1e-6):
+        return None
+    for kw, explanation in (
+            (dict(ndc=False), "that is σ_px, in pixels²: σ is in NDC, where the image is 2 wide: "
+                              "σ = σ_px · 4 / W²"),
+            (dict(half=False), "the blur spans both sides of the edge: D = level at a distance of width / 2 "
+                               "outside, and 1 − level at width / 2 inside"),
+            (dict(logit=False), "D = sigmoid(−d² / σ_px) = level gives d² / σ_px = ln((1 − level) / level), "
+                                "not ln(1 / level)"),
+            (dict(square=False), "σ divides d², not d: σ_px = d² / ln((1 − level) / level)"),
+            (dict(ndc=False, half=False), "the width spans both sides of the edge (d = width / 2), and σ is in "
+                                          "NDC (σ = σ_px · 4 / W²)")):
+        if math.isclose(got, _sigma_for_blur(width_px, image_width, level, **kw), rel_tol=1e-6):
+            return f"{name}: {explanation}"
+    return f"{name}: got {got:.6g}, expected {expected:.6g}"
+
+
+@task("8.4", "sigma_for_blur", points=2, reference=("course.soft", "soft_rasterize"))
+def _check_sigma_for_blur(impl):
+    forbidden = forbidden_call(impl, "sigma_for_blur", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+
+    def paper():
+        for width in (2.0, 4.4):
+            require(_sigma_problem(impl, width, 256, 0.05))
+
+    def others():
+        for args in ((1.0, 64, 0.01), (3.0, 100, 0.25), (10.0, 512, 1e-3), (0.5, 32, 0.1)):
+            require(_sigma_problem(impl, *args))
+    return grade_parts((1, "a 256-pixel image, 5 % to 95 %", paper),
+                       (1, "other widths, image sizes and levels", others))
