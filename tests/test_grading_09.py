@@ -12,27 +12,43 @@ from course.coverage import halfplane_pixel_area
 from course.grading import run_check, tasks_for_lecture
 from grading_contract import contract
 from course.grading import lecture09
-from course.grading.lecture09 import boundary_term_reference, central_difference_reference, edge_sample_reference
+from course.grading.lecture09 import (best_step_reference, boundary_term_reference, edge_sample_reference,
+                                      triangle_term_reference)
 from course.mesh import Mesh
 from course.visibility import image_gradient
 
 # the public references are forbidden to students; these call the same code under its private names
-REFERENCES = {"9.1": lambda f, x, h: lecture09._central(f, x, h),
+REFERENCES = {"9.1": lambda f, x, grad, steps, dtype: lecture09._best(f, x, grad, steps, dtype),
               "9.2": lambda *a: lecture09._boundary(*a).to(a[4].dtype),
-              "9.3": lambda p0, p1, v0, v1, jump, col, row, n, gen: lecture09._estimate(
+              "9.3": lambda *a: lecture09._triangle(*a).to(a[2].dtype),
+              "9.4": lambda p0, p1, v0, v1, jump, col, row, n, gen: lecture09._estimate(
                   p0, p1, v0, v1, jump, col, row, torch.rand(n, generator=gen, dtype=torch.float64)).to(jump.dtype)}
 
 
 # ------------------------------------------------------------------------------ solutions, as students write
 
-def central_difference(f, x, h, forward=False, denominator=2.0):
+def central_difference(f, x, h, forward=False):
     grads = torch.zeros_like(x)
     for i in range(x.shape[0]):
         step = torch.zeros_like(x)
         step[i] = h
         low = f(x) if forward else f(x - step)
-        grads[i] = (f(x + step) - low) / (h if forward else denominator * h)
+        grads[i] = (f(x + step) - low) / (h if forward else 2 * h)
     return grads
+
+
+def steps_analysis(f, x, grad, steps, dtype, forward=False, cast=True, relative=True, worst=False, index=False):
+    x = x.to(dtype) if cast else x
+    errors = []
+    for h in steps:
+        diff = central_difference(f, x, h, forward).double() - grad
+        errors.append(float(diff.norm() / grad.norm() if relative else diff.norm()))
+    k = errors.index(max(errors) if worst else min(errors))
+    return (k if index else steps[k]), errors[k]
+
+
+def best_step(f, x, grad, steps, dtype):
+    return steps_analysis(f, x, grad, steps, dtype)
 
 
 def clip_to_pixel(p0, p1, col, row):
@@ -87,29 +103,67 @@ def edge_sample(p0, p1, v0, v1, jump, col, row, samples, generator):
     return sample(p0, p1, v0, v1, jump, col, row, samples, generator)
 
 
-SOLUTIONS = {"9.1": central_difference, "9.2": boundary_term, "9.3": edge_sample}
+def triangle(tri, vel, color, background, col, row, orient="out", jump=None):
+    total = torch.zeros_like(color)
+    for k in range(3):
+        a, b, va, vb = tri[k], tri[(k + 1) % 3], vel[k], vel[(k + 1) % 3]
+        e = b - a
+        inward = float(torch.stack([e[1], -e[0]]) @ (tri[(k + 2) % 3] - a)) > 0
+        if (orient == "out" and inward) or (orient == "in" and not inward):
+            a, b, va, vb = b, a, vb, va
+        total = total + boundary_term(a, b, va, vb, color - background if jump is None else jump(color, background),
+                                      col, row)
+    return total
+
+
+def triangle_term(tri, vel, color, background, col, row):
+    return triangle(tri, vel, color, background, col, row)
+
+
+def counter_clockwise_only(tri, vel, color, background, col, row):
+    """Keeps the edges as the vertices come: right for one winding, the wrong way round for the other."""
+    return triangle(tri, vel, color, background, col, row, orient="given")
+
+
+def boundary_term_unwritten(p0, p1, v0, v1, jump, col, row):
+    raise NotImplementedError()
+
+
+def triangle_on_an_unwritten_boundary_term(tri, vel, color, background, col, row):
+    return sum(boundary_term_unwritten(tri[k], tri[(k + 1) % 3], vel[k], vel[(k + 1) % 3], color - background,
+                                       col, row) for k in range(3))
+
+
+SOLUTIONS = {"9.1": best_step, "9.2": boundary_term, "9.3": triangle_term, "9.4": edge_sample}
 
 MISTAKES = [
-    ("9.1", lambda f, x, h: central_difference(f, x, h, forward=True), 0, ["forward difference"]),
-    ("9.1", lambda f, x, h: central_difference(f, x, h, denominator=1.0), 0, ["divide by 2h"]),
-    ("9.1", lambda f, x, h: central_difference(f, x, h, denominator=4.0), 0, ["divide by 2h"]),
-    ("9.1", lambda f, x, h: -central_difference(f, x, h), 0, ["sign is flipped"]),
-    ("9.1", lambda f, x, h: central_difference(f, x.double(), h), 2, ["keep the input's dtype"]),
+    ("9.1", lambda *a: steps_analysis(*a, cast=False), 1, ["not in float32", "cast x to dtype"]),
+    ("9.1", lambda *a: steps_analysis(*a, forward=True), 0, ["forward difference"]),
+    ("9.1", lambda *a: steps_analysis(*a, relative=False), 0, ["the error is absolute"]),
+    ("9.1", lambda *a: steps_analysis(*a, worst=True), 0, ["largest error"]),
+    ("9.1", lambda *a: steps_analysis(*a, index=True), 0, ["is an index"]),
+    ("9.1", lambda f, x, grad, steps, dtype: (1e-5, 2.1e-11), 0, ["h = 1e-05 expected 0.1"]),
+    ("9.1", lambda *a: list(steps_analysis(*a)) + [0.0], 0, ["return a pair (h, error)"]),
     ("9.2", lambda *a: term(*a, sign=-1.0), 0, ["sign of the normal"]),
     ("9.2", lambda *a: term(*a, length=False), 0, ["length of the edge inside the pixel is missing"]),
     ("9.2", lambda *a: term(*a, unit=False), 0, ["not normalised"]),
     ("9.2", lambda *a: term(*a, clip=False), 0, ["clip it to the pixel"]),
-    ("9.2", lambda *a: term(*a, guard=False), 2, ["zero-length edge"]),
-    ("9.3", lambda *a: sample(*a, length=False), 0, ["length weight is missing"]),
-    ("9.3", lambda *a: sample(*a, per_hit=True), 0, ["biased"]),
-    ("9.3", lambda *a: sample(*a, fixed=True), 2, ["the same result for every generator"]),
-    ("9.3", lambda *a: sample(*a, count=64), 1, ["standard deviations", "expected about 4"]),
+    ("9.2", lambda *a: term(*a, guard=False), 3, ["zero-length edge"]),
+    ("9.3", counter_clockwise_only, 0, ["right for one winding only"]),
+    ("9.3", lambda *a: triangle(*a, orient="in"), 0, ["the sign is flipped"]),
+    ("9.3", lambda *a: triangle(*a, jump=lambda c, b: c), 1, ["the background is missing"]),
+    ("9.3", lambda *a: triangle(*a, jump=lambda c, b: b - c), 0, ["the sign is flipped"]),
+    ("9.3", triangle_on_an_unwritten_boundary_term, 0, ["boundary_term_unwritten, which it calls, is not written"]),
+    ("9.4", lambda *a: sample(*a, length=False), 0, ["length weight is missing"]),
+    ("9.4", lambda *a: sample(*a, per_hit=True), 0, ["biased"]),
+    ("9.4", lambda *a: sample(*a, fixed=True), 2, ["the same result for every generator"]),
+    ("9.4", lambda *a: sample(*a, count=64), 1, ["standard deviations", "expected about 4"]),
 ]
 
 
-def test_lecture_09_has_three_tasks_of_three_points_each():
+def test_lecture_09_has_four_tasks_with_points_by_difficulty():
     assert [(t.id, t.name, t.points) for t in tasks_for_lecture(9)] == [
-        ("9.1", "central_difference", 3), ("9.2", "boundary_term", 3), ("9.3", "edge_sample", 3)]
+        ("9.1", "best_step", 3), ("9.2", "boundary_term", 4), ("9.3", "triangle_term", 2), ("9.4", "edge_sample", 3)]
     assert {task for task, *_ in MISTAKES} == set(REFERENCES)
 
 
@@ -119,15 +173,23 @@ def test_lecture_09_has_three_tasks_of_three_points_each():
 
 # ------------------------------------------------------------------------- the references against the package
 
-def test_the_central_difference_reference_matches_autograd_of_the_pixel_coverage():
-    """The coverage of a pixel by a half-plane is piecewise quadratic in (a, b, c): with h = 1e-6 the central
-    difference and autograd agree to ~1e-9 (truncation h² f''' is 0 inside a piece, rounding eps / h ~ 1e-10)."""
+def test_the_best_step_reference_finds_the_bottom_of_the_step_size_curve():
+    """On the coverage of a pixel by a half-plane, as a function of (a, b, c): the central difference at the
+    float64 best step agrees with autograd to 1e-9; float32's best step is larger and its error far larger
+    (round-off lifts the left branch), while at the largest step both precisions make the same truncation
+    error (1 %)."""
     line = torch.tensor([0.6, -0.8, 0.8 * 3.4 - 0.6 * 5.3], dtype=torch.float64, requires_grad=True)
     area = lambda l: halfplane_pixel_area(l, 5, 3)                        # noqa: E731
     area(line).backward()
-    fd = central_difference_reference(area, line.detach(), 1e-6)
-    assert torch.allclose(fd, line.grad, atol=1e-8, rtol=0)
-    assert line.grad.abs().min() > 0.1
+    steps = [10.0 ** -k for k in range(1, 9)]
+    h64, e64 = best_step_reference(area, line.detach(), line.grad, steps, torch.float64)
+    h32, e32 = best_step_reference(area, line.detach(), line.grad, steps, torch.float32)
+    fd = lecture09._central(area, line.detach(), h64)
+    assert torch.allclose(fd, line.grad, atol=1e-9, rtol=0) and e64 < 1e-9
+    assert h32 > h64 and e32 > 1e3 * e64
+    big = [lecture09._step_errors(area, line.detach(), line.grad, steps[:1], dtype)[0]
+           for dtype in (torch.float64, torch.float32)]
+    assert math.isclose(big[0], big[1], rel_tol=1e-2)
 
 
 @pytest.mark.parametrize("p, q", [((5.3, 3.4), (4.1, 1.2)), ((3.7, 2.2), (7.4, 4.9)), ((4.9, 2.1), (4.2, 3.8))])
@@ -151,35 +213,32 @@ def test_the_boundary_term_of_a_translated_line_is_the_derivative_of_the_covered
     assert torch.allclose(boundary_term_reference(p0, p1, v, v, jump, 4, 2), expected, atol=1e-12, rtol=1e-12)
 
 
-def test_the_boundary_terms_of_a_triangle_add_up_to_image_gradient():
+@pytest.mark.parametrize("order", [(0, 1, 2), (0, 2, 1)], ids=["one winding", "the other winding"])
+def test_the_triangle_term_is_the_derivative_of_image_gradient(order):
     """One flat triangle in front of a black background, a screen-aligned orthographic camera (pixel = world
-    x, y): d pixel / d vertex_0.x is the sum over the two edges at vertex 0 of the boundary term with v = (1, 0)
-    at vertex 0 and 0 at the other end (the third edge does not move). Against image_gradient("exact") and
-    "reynolds" for every pixel the triangle touches: float64, 1e-10."""
+    x, y), its vertices moving at random screen velocities: d pixel / dt = Σ_k dL/dvert_k · vel_k from
+    image_gradient("exact") and "reynolds", for every pixel the triangle touches, whichever order its vertices
+    come in: float64, 1e-10."""
     H, W = 8, 10
     cam = Camera(torch.eye(3, dtype=torch.float64), torch.eye(3, dtype=torch.float64),
                  torch.zeros(3, dtype=torch.float64), width=W, height=H, near=0.0, far=10.0, orthographic=True)
     tri = torch.tensor([[2.3, 1.6], [8.7, 3.2], [4.1, 6.9]], dtype=torch.float64)
     mesh = Mesh(torch.cat([tri, torch.full((3, 1), 2.0, dtype=torch.float64)], 1), torch.tensor([[0, 1, 2]]))
     color = torch.tensor([[0.9, 0.4, 0.2]], dtype=torch.float64)
-    zero, push = torch.zeros(2, dtype=torch.float64), torch.tensor([1.0, 0.0], dtype=torch.float64)
+    vel = torch.randn(3, 2, generator=torch.Generator().manual_seed(9), dtype=torch.float64)
+    o = list(order)
     checked = 0
     for row in range(H):
         for col in range(W):
-            ours = torch.zeros(3, dtype=torch.float64)
-            for k in (1, 2):                                              # the edges 0-1 and 0-2
-                a, b, va, vb = tri[0], tri[k], push, zero
-                e = b - a
-                if float(torch.stack([e[1], -e[0]]) @ (tri[3 - k] - a)) > 0:   # outward must point away from
-                    a, b, va, vb = b, a, vb, va                                # the third vertex
-                ours = ours + boundary_term_reference(a, b, va, vb, color[0], col, row)
+            ours = triangle_term_reference(tri[o], vel[o], color[0], torch.zeros(3, dtype=torch.float64), col, row)
             weights = torch.zeros(H, W, 3, dtype=torch.float64)
             weights[row, col, 0] = 1.0
             for method in ("exact", "reynolds"):
                 g = image_gradient(mesh, cam, color, weights, method=method)
-                assert abs(float(g[0, 0]) - float(ours[0])) < 1e-10, (row, col, method, float(g[0, 0]), float(ours[0]))
+                rate = float((g[:, :2] * vel).sum())
+                assert abs(rate - float(ours[0])) < 1e-10, (row, col, method, rate, float(ours[0]))
             checked += bool(ours.abs().sum() > 0)
-    assert checked >= 5
+    assert checked >= 10
 
 
 def test_the_edge_sampling_reference_is_unbiased_and_its_error_falls_like_one_over_sqrt_n():
@@ -195,9 +254,10 @@ def test_the_edge_sampling_reference_is_unbiased_and_its_error_falls_like_one_ov
 
 
 CALLING_THE_PACKAGE = {
-    "9.1": lambda f, x, h: image_gradient(None, None, None, None, method="finite_differences"),
+    "9.1": lambda f, x, grad, steps, dtype: image_gradient(None, None, None, None, method="finite_differences"),
     "9.2": lambda p0, p1, v0, v1, jump, col, row: halfplane_pixel_area(None, col, row),
-    "9.3": lambda *a: image_gradient(None, None, None, None, method="edge_sampling"),
+    "9.3": lambda *a: image_gradient(None, None, None, None, method="reynolds"),
+    "9.4": lambda *a: image_gradient(None, None, None, None, method="edge_sampling"),
 }
 
 

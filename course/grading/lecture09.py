@@ -1,11 +1,17 @@
-"""The checks of lecture 9's graded tasks (visibility gradients): 9.1 central_difference, 9.2 boundary_term,
-9.3 edge_sample.
+"""The checks of lecture 9's graded tasks (visibility gradients): 9.1 best_step, 9.2 boundary_term,
+9.3 triangle_term, 9.4 edge_sample.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``.
 
-The three tasks live on one pixel and one straight edge, the example lecture 09 works by hand. The edge runs
+9.1 is an analysis: the central difference (f(x + h e_i) − f(x − h e_i)) / 2h of a function the grader
+chooses, evaluated in a given dtype at each of a list of steps, its relative error ‖g − grad‖ / ‖grad‖ to the
+exact gradient, and the step where that error is smallest, with its error. The answer depends on the
+function (its size |f| sets the round-off, its third derivative the truncation) and on the dtype, so the
+check runs the student's function on functions, points and dtypes of its own.
+
+9.2 to 9.4 live on one pixel and straight edges, the example lecture 09 works by hand. An edge runs
 p0 → p1 (pixels, x right, y down); its points move, p(s) = p0 + s (p1 − p0) at the velocity
 v(s) = (1 − s) v0 + s v1 (s in [0, 1]); the region on the edge's right as drawn on screen, the side its normal
 n = (e_y, −e_x) / |e| (e = p1 − p0) points *away* from, has colour c_in, the other side c_out, and
@@ -15,8 +21,11 @@ the pixel's box-filtered value (the integral of the colour over its unit square)
     d value / dt = ∫_{edge ∩ pixel} jump (v · n) ds,
 
 and since v · n is linear along the edge, the integral is ``|e| (s1 − s0) jump (v(s_mid) · n)`` with
-[s0, s1] the part of the edge inside the square and s_mid its middle. Edge sampling (Li et al. 2018) estimates
-the same integral from N uniform points on the whole edge: ``|e| / N Σ_k [p(s_k) in pixel] jump (v(s_k) · n)``.
+[s0, s1] the part of the edge inside the square and s_mid its middle (9.2). A flat triangle of colour c over a
+background b (9.3) is the sum of its three edges' terms, each edge oriented so that its normal leaves the
+triangle (jump = c − b): the orientation follows the triangle's winding, which the check varies. Edge sampling
+(Li et al. 2018) estimates 9.2's integral from N uniform points on the whole edge:
+``|e| / N Σ_k [p(s_k) in pixel] jump (v(s_k) · n)`` (9.4).
 
 The references are written here from these formulas, in float64; ``tests/test_grading_09.py`` checks that
 they agree with autograd through ``course.coverage.halfplane_pixel_area`` and with
@@ -27,27 +36,30 @@ doing the task's work, scores 0.
 from __future__ import annotations
 
 import math
+import traceback
 
 import torch
 
-from .helpers import _call, _close, compare, generator, grade_parts, require, to_tensor
+from .helpers import Fail, _call, _close, _not_attempted, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
-__all__ = ["central_difference_reference", "boundary_term_reference", "edge_sample_reference"]
+__all__ = ["best_step_reference", "boundary_term_reference", "triangle_term_reference", "edge_sample_reference"]
 
 FORBIDDEN = [("course.visibility", "image_gradient"), ("course.visibility", "fd_gradient"),
              ("course.boundary", "boundary_gradient"), ("course.boundary", "boundary_points"),
              ("course.coverage", "halfplane_pixel_area"),
-             ("course.grading.lecture09", "central_difference_reference"),
+             ("course.grading.lecture09", "best_step_reference"),
              ("course.grading.lecture09", "boundary_term_reference"),
+             ("course.grading.lecture09", "triangle_term_reference"),
              ("course.grading.lecture09", "edge_sample_reference")]
 
 
 # ------------------------------------------------------------------------------------- the references
 
-def central_difference_reference(f, x, h) -> torch.Tensor:
-    """9.1: ``(f(x + h e_i) − f(x − h e_i)) / 2h`` for every i, (N,) in x's dtype; f maps (N,) to a scalar."""
-    return _central(f, x, h)
+def best_step_reference(f, x, grad, steps, dtype) -> tuple[float, float]:
+    """9.1: ``(h, error)``, the step of ``steps`` whose central difference of f at x, computed in ``dtype``, has
+    the smallest relative error ‖g − grad‖ / ‖grad‖ (computed in float64), and that error."""
+    return _best(f, x, grad, steps, dtype)
 
 
 def boundary_term_reference(p0, p1, v0, v1, jump, col: int, row: int) -> torch.Tensor:
@@ -55,8 +67,15 @@ def boundary_term_reference(p0, p1, v0, v1, jump, col: int, row: int) -> torch.T
     return _boundary(p0, p1, v0, v1, jump, col, row).to(jump.dtype)
 
 
+def triangle_term_reference(tri, vel, color, background, col: int, row: int) -> torch.Tensor:
+    """9.3: d(pixel value)/dt (C,) of a flat triangle ``tri`` (3, 2) of colour ``color`` (C,) over ``background``
+    (C,) whose vertices move at ``vel`` (3, 2): its three edges' boundary terms, each edge's normal out of the
+    triangle; in color's dtype (computed in float64)."""
+    return _triangle(tri, vel, color, background, col, row).to(color.dtype)
+
+
 def edge_sample_reference(p0, p1, v0, v1, jump, col: int, row: int, samples: int, gen) -> torch.Tensor:
-    """9.3: the edge-sampling estimate (C,) of 9.2's integral from ``samples`` uniform points on the edge,
+    """9.4: the edge-sampling estimate (C,) of 9.2's integral from ``samples`` uniform points on the edge,
     s = ``torch.rand(samples, generator=gen)``, in jump's dtype (computed in float64)."""
     s = torch.rand(samples, generator=gen, dtype=torch.float64)
     return _estimate(p0, p1, v0, v1, jump, col, row, s).to(jump.dtype)
@@ -71,6 +90,25 @@ def _central(f, x, h, forward=False, denominator=2.0) -> torch.Tensor:
         lo = f(x) if forward else f(x - e)
         out.append((torch.as_tensor(f(x + e)) - torch.as_tensor(lo)) / (h if forward else denominator * h))
     return torch.stack(out).to(x.dtype)
+
+
+def _step_errors(f, x, grad, steps, dtype, *, forward=False, cast=True, relative=True) -> list[float]:
+    """The error of the central difference at each step, and the typical mistakes as switches: ``forward``
+    (the forward difference), ``cast`` (evaluate in ``dtype``; else in x's own dtype), ``relative`` (divide by
+    ‖grad‖; else the absolute error)."""
+    x = x.to(dtype) if cast else x
+    grad = torch.as_tensor(grad).to(torch.float64)
+    errors = []
+    for h in steps:
+        err = (_central(f, x, h, forward=forward).to(torch.float64) - grad).norm()
+        errors.append(float(err / grad.norm() if relative else err))
+    return errors
+
+
+def _best(f, x, grad, steps, dtype, worst=False, **mistake) -> tuple[float, float]:
+    errors = _step_errors(f, x, grad, steps, dtype, **mistake)
+    k = (max if worst else min)(range(len(steps)), key=errors.__getitem__)
+    return float(steps[k]), errors[k]
 
 
 def _f64(*xs):
@@ -113,7 +151,7 @@ def _boundary(p0, p1, v0, v1, jump, col, row, *, clip=True, length=True, sign=1.
 
 
 def _estimate(p0, p1, v0, v1, jump, col, row, s, *, length=True, per_hit=False) -> torch.Tensor:
-    """9.3 (C,) float64 at the points s (N,) of the edge; mistakes: no length weight, dividing by the hits."""
+    """9.4 (C,) float64 at the points s (N,) of the edge; mistakes: no length weight, dividing by the hits."""
     p0, p1, v0, v1, jump = _f64(p0, p1, v0, v1, jump)
     e = p1 - p0
     L = float(e.norm())
@@ -136,72 +174,89 @@ def _match(got, variants, tol=1e-6):
     return None
 
 
-# ------------------------------------------------------------------------------ 9.1 central difference
 
-def _cubic(x):
-    """A smooth test function of (N,) → scalar whose third derivatives are not zero (so O(h²) shows)."""
+# ------------------------------------------------------------------------------------- 9.1 the best step
+
+def _smooth(x):
+    """A smooth test function of (N,) → scalar, of order one near 0, in x's dtype."""
     w = torch.arange(1, x.shape[0] + 1, dtype=x.dtype)
-    return (w * x ** 3).sum() - 2.0 * (x[0] * x[-1]) + torch.sin(x).sum()
+    return (w * torch.exp(0.5 * x)).sum() + x[0] * x[1] ** 2
 
 
-def _coverage_of(line):
-    """The covered area of pixel (row 3, col 5) by the half-plane a x + b y + c >= 0 (a closure over the
-    package's halfplane_pixel_area, which the check may call: the student's code only calls f)."""
-    from course.coverage import halfplane_pixel_area
-    return halfplane_pixel_area(line, 5, 3)
+def _far(x):
+    """The same function lifted by 1000: the same derivatives, a thousand times the round-off."""
+    return _smooth(x) + 1000.0
 
 
-def _difference_problem(impl, f, x, h, label, fname) -> str | None:
-    name = f"central_difference({label})"
-    got = to_tensor(_call(impl, f, x, h), name)
-    expected = _central(f, x, h)
-    low = x.dtype == torch.float32
-    message = compare(got, expected, name=name, check_dtype=True,
-                      **(dict(atol=1e-3, rtol=1e-3) if low else dict(atol=1e-9, rtol=1e-9)))
-    if message is None or "shape" in message or "dtype" in message:
-        return message
-    scale = 4 * torch.finfo(x.dtype).eps * (1 + float(torch.as_tensor(f(x)).abs())) / h
-    explanation = _match(got, [
-        (_central(f, x, h, forward=True),
-         f"that is the forward difference (f(x + h) − f(x)) / h, whose error is O(h): step both ways, "
-         f"(f(x + h e_i) − f(x − h e_i)) / 2h, error O(h²) ({fname})"),
-        (_central(f, x, h, denominator=1.0),
-         "twice the derivative: the two evaluations are 2h apart, divide by 2h, not h"),
-        (_central(f, x, h, denominator=4.0),
-         "half the derivative: the two evaluations are 2h apart, divide by 2h (step ±h, not ±h/2 over h)"),
-        (-_central(f, x, h), "the sign is flipped: f(x + h e_i) − f(x − h e_i), in that order"),
-    ], tol=max(1e-6, 10 * scale))
-    return f"{name}: {explanation}" if explanation else message
+def _pair(out, name) -> tuple[float, float]:
+    """A student's ``(h, error)`` as two floats, or ``Fail`` saying what was expected."""
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        raise Fail(f"{name}: return a pair (h, error), got {type(out).__name__}"
+                   + (f" of {len(out)}" if isinstance(out, (tuple, list)) else ""))
+    values = []
+    for value, what in zip(out, ("h", "error")):
+        if isinstance(value, torch.Tensor) and value.numel() == 1:
+            value = value.item()
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise Fail(f"{name}: {what} should be a number, got {type(value).__name__}")
+        values.append(float(value))
+    return values[0], values[1]
 
 
-@task("9.1", "central_difference", points=3, reference=("course.visibility", "fd_gradient"))
-def _check_central_difference(impl):
-    forbidden = forbidden_call(impl, "central_difference", FORBIDDEN)
+def _step_problem(impl, f, x, steps, dtype, label) -> str | None:
+    name = f"best_step({label})"
+    xg = x.clone().requires_grad_(True)
+    f(xg).backward()                                                        # the exact gradient, float64
+    grad = xg.grad.detach()
+    h, err = _pair(_call(impl, f, x, grad, list(steps), dtype), name)
+    want_h, want_err = _best(f, x, grad, steps, dtype)
+    rtol = 2e-2 if dtype == torch.float32 else 1e-3
+    if math.isclose(h, want_h, rel_tol=1e-9) and math.isclose(err, want_err, rel_tol=rtol):
+        return None
+
+    def near(pair):
+        return math.isclose(h, pair[0], rel_tol=1e-9) and math.isclose(err, pair[1], rel_tol=rtol)
+    for pair, explanation in (
+            (_best(f, x, grad, steps, dtype, cast=False),
+             f"the differences were evaluated in {str(x.dtype)[6:]}, not in {str(dtype)[6:]}: cast x to dtype "
+             "first, so that f computes in it (its round-off, about ε |f| / h, decides where the best step is)"),
+            (_best(f, x, grad, steps, dtype, forward=True),
+             "that is the forward difference (f(x + h e_i) − f(x)) / h, error O(h): step both ways, "
+             "(f(x + h e_i) − f(x − h e_i)) / 2h"),
+            (_best(f, x, grad, steps, dtype, relative=False),
+             "the error is absolute: the relative error is ‖g − grad‖ / ‖grad‖"),
+            (_best(f, x, grad, steps, dtype, worst=True), "that is the largest error: return the step whose error "
+                                                          "is the smallest, and that error")):
+        if near(pair):
+            return f"{name}: {explanation}"
+    if h in range(len(steps)) and not any(math.isclose(h, s, rel_tol=1e-9) for s in steps):
+        return f"{name}: h = {h:g} is an index: return the step itself, steps[k]"
+    if not math.isclose(h, want_h, rel_tol=1e-9):
+        return f"{name}: h = {h:g} expected {want_h:g} (its relative error {want_err:.3g}; you return {err:.3g})"
+    return f"{name}: the error at h = {h:g} is {want_err:.4g}, you return {err:.4g}"
+
+
+@task("9.1", "best_step", points=3, reference=("course.visibility", "fd_gradient"))
+def _check_best_step(impl):
+    forbidden = forbidden_call(impl, "best_step", FORBIDDEN)
     if forbidden:
         return 0, forbidden
+    x = torch.tensor([0.3, -0.7, 1.1], dtype=torch.float64)
+    steps = [10.0 ** -k for k in range(1, 9)]
 
-    def smooth():
-        x = torch.tensor([0.7, -1.3, 0.4, 2.1], dtype=torch.float64)
-        require(_difference_problem(impl, _cubic, x, 1e-2, "a cubic, h = 1e-2, float64", "a cubic"))
-        require(_difference_problem(impl, _cubic, x, 1e-5, "a cubic, h = 1e-5, float64", "a cubic"))
+    def f64():
+        require(_step_problem(impl, _smooth, x, steps, torch.float64, "a smooth function, float64"))
 
-    def coverage():
-        line = torch.tensor([0.6, -0.8, 0.8 * 3.4 - 0.6 * 5.3], dtype=torch.float64)  # through (5.3, 3.4)
-        require(_difference_problem(impl, _coverage_of, line, 1e-4,
-                                    "the coverage of pixel (3, 5) by a half-plane, h = 1e-4, float64",
-                                    "the pixel coverage"))
-        g = generator(91)
-        x = torch.randn(6, generator=g, dtype=torch.float64)
-        require(_difference_problem(impl, _cubic, x, 3e-3, "6 random parameters, h = 3e-3, float64", "a cubic"))
+    def f32():
+        require(_step_problem(impl, _smooth, x, steps, torch.float32, "a smooth function, float32"))
 
-    def dtypes():
-        x = torch.tensor([0.3, 0.9, -0.5], dtype=torch.float32)
-        require(_difference_problem(impl, _cubic, x, 1e-2, "a cubic, h = 1e-2, float32", "a cubic"))
-        one = torch.tensor([1.25], dtype=torch.float64)
-        require(_difference_problem(impl, _cubic, one, 1e-3, "a single parameter, float64", "a cubic"))
-    return grade_parts((1, "a smooth function", smooth),
-                       (1, "a pixel's coverage, random parameters", coverage),
-                       (1, "float32 and a single parameter", dtypes))
+    def far():
+        mixed = [1e-3, 1e-1, 1e-5, 1e-2, 1e-4, 1e-6]                        # not sorted
+        y = torch.tensor([0.9, 0.2, -0.4, 0.6], dtype=torch.float64)
+        require(_step_problem(impl, _far, y, mixed, torch.float32, "the function + 1000, float32"))
+        require(_step_problem(impl, _far, y, mixed, torch.float64, "the function + 1000, float64"))
+    return grade_parts((1, "float64", f64), (1, "float32", f32),
+                       (1, "a function far from 0, steps in any order", far))
 
 
 # ------------------------------------------------------------------------------ 9.2 the boundary term
@@ -242,7 +297,7 @@ def _edge_args(p0, p1, v0, v1, jump, col, row, dtype=torch.float64):
     return t(p0), t(p1), t(v0), t(v1), t(jump), col, row
 
 
-@task("9.2", "boundary_term", points=3, reference=("course.boundary", "boundary_gradient"))
+@task("9.2", "boundary_term", points=4, reference=("course.boundary", "boundary_gradient"))
 def _check_boundary_term(impl):
     forbidden = forbidden_call(impl, "boundary_term", FORBIDDEN)
     if forbidden:
@@ -276,11 +331,95 @@ def _check_boundary_term(impl):
         args = _edge_args([3.2, 1.4], [6.9, 5.1], [0.6, -0.2], [0.1, 0.4], [0.8, -0.3, 0.25], 4, 2, torch.float32)
         require(_boundary_problem(impl, args, "float32"))
     return grade_parts((1, "an edge moved rigidly", translation),
-                       (1, "endpoints moving differently, clipped pieces", rotation),
+                       (2, "endpoints moving differently, clipped pieces", rotation),
                        (1, "missing the pixel, zero length, axis-aligned, float32", stress))
 
 
-# ------------------------------------------------------------------------------- 9.3 edge sampling
+
+# ----------------------------------------------------------------------------- 9.3 a triangle's edges
+
+def _triangle(tri, vel, color, background, col, row, *, orient="out", background_counts=True) -> torch.Tensor:
+    """9.3 (C,) float64, and the typical mistakes as switches: ``orient`` "out" (each edge's normal leaves the
+    triangle), "given" (the edges k → k+1 as the vertices come: right for one winding only), "in" (every normal
+    into the triangle); ``background_counts`` (jump = colour − background, else the colour alone)."""
+    tri, vel, color, background = _f64(tri, vel, color, background)
+    jump = color - background if background_counts else color
+    total = torch.zeros_like(color)
+    for k in range(3):
+        a, b, va, vb = tri[k], tri[(k + 1) % 3], vel[k], vel[(k + 1) % 3]
+        e = b - a
+        inward = float(torch.stack([e[1], -e[0]]) @ (tri[(k + 2) % 3] - a)) > 0   # the normal points at the third
+        if (orient == "out" and inward) or (orient == "in" and not inward):       # vertex: into the triangle
+            a, b, va, vb = b, a, vb, va
+        total = total + _boundary(a, b, va, vb, jump, col, row)
+    return total
+
+
+def _triangle_problem(impl, args, label) -> str | None:
+    name = f"triangle_term({label})"
+    color = args[2]
+    try:
+        got = to_tensor(_call(impl, *args), name)
+    except NotImplementedError as exc:                                    # boundary_term not written yet?
+        frames = traceback.extract_tb(exc.__traceback__)
+        if frames and frames[-1].name != getattr(impl, "__name__", None) and _not_attempted(exc):
+            raise Fail(f"{name}: {frames[-1].name}, which it calls, is not written yet: write it first "
+                       "(task 9.2)") from None
+        raise
+    expected = _triangle(*args).to(color.dtype)
+    low = color.dtype == torch.float32
+    message = compare(got, expected, name=name, check_dtype=True, **({} if low else dict(atol=1e-12, rtol=1e-9)))
+    if message is None or "shape" in message or "dtype" in message:
+        return message
+    ref = lambda **kw: _triangle(*args, **kw)                            # noqa: E731
+    explanation = _match(got, [
+        (ref(orient="given"), "the edges run as the vertices come: that is right for one winding only; decide for "
+                              "each edge which side the triangle is on (where its third vertex lies) and orient the "
+                              "edge so that its normal leaves the triangle"),
+        (ref(orient="in"), "the sign is flipped: with jump = colour − background the normal must leave the "
+                           "triangle, not point into it"),
+        (ref(background_counts=False), "the background is missing: the jump across the edge is colour − "
+                                       "background"),
+    ])
+    return f"{name}: {explanation}" if explanation else message
+
+
+def _tri_args(tri, vel, color, background, col, row, dtype=torch.float64):
+    t = lambda x: torch.tensor(x, dtype=dtype)                            # noqa: E731
+    return t(tri), t(vel), t(color), t(background), col, row
+
+
+@task("9.3", "triangle_term", points=2, reference=("course.boundary", "boundary_gradient"))
+def _check_triangle_term(impl):
+    forbidden = forbidden_call(impl, "triangle_term", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+    tri = [[2.3, 1.6], [8.7, 3.2], [4.1, 6.9]]
+    push = [[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]
+
+    def windings():
+        for order, winding in (([0, 1, 2], "one winding"), ([0, 2, 1], "the other winding")):
+            t, v = [tri[k] for k in order], [push[k] for k in order]
+            args = _tri_args(t, v, [0.9, 0.4, 0.2], [0.0, 0.0, 0.0], 2, 3)
+            require(_triangle_problem(impl, args, f"vertex 0 pushed along x, pixel (3, 2), {winding}"))
+            args = _tri_args(t, v, [0.9, 0.4, 0.2], [0.0, 0.0, 0.0], 5, 2)
+            require(_triangle_problem(impl, args, f"vertex 0 pushed along x, pixel (2, 5), {winding}"))
+
+    def random():
+        g = generator(95)
+        for k in range(4):
+            t = torch.rand(3, 2, generator=g, dtype=torch.float64) * 5.0 + 0.5
+            v = torch.randn(3, 2, generator=g, dtype=torch.float64)
+            c, b = torch.rand(3, generator=g, dtype=torch.float64), torch.rand(3, generator=g, dtype=torch.float64)
+            require(_triangle_problem(impl, (t, v, c, b, 2, 2), f"random triangle {k} over a grey background, "
+                                                               "every vertex moving, float64"))
+        args = _tri_args([[4.5, 1.2], [1.3, 5.8], [6.2, 4.9]], [[0.3, -0.2], [0.1, 0.5], [-0.4, 0.2]],
+                         [0.2, 0.7, 0.5], [0.3, 0.3, 0.3], 3, 3, torch.float32)
+        require(_triangle_problem(impl, args, "float32"))
+    return grade_parts((1, "both windings", windings), (1, "random triangles, a background, float32", random))
+
+
+# ------------------------------------------------------------------------------- 9.4 edge sampling
 
 # The estimator's spread: with N points the estimate's standard deviation is σ_1 / √N, σ_1 the spread of one
 # sample, |e| jump (v · n)(s) [p(s) in pixel] with s uniform. A correct estimator lands within Z standard
@@ -352,7 +491,7 @@ def _sampling_rate(impl, args) -> str | None:
     return None
 
 
-@task("9.3", "edge_sample", points=3, reference=("course.boundary", "boundary_gradient"))
+@task("9.4", "edge_sample", points=3, reference=("course.boundary", "boundary_gradient"))
 def _check_edge_sample(impl):
     forbidden = forbidden_call(impl, "edge_sample", FORBIDDEN)
     if forbidden:
