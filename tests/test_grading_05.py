@@ -6,6 +6,7 @@ import torch
 
 from course import antialias, coverage, raster
 from course.grading import TASKS, run_check, tasks_for_lecture
+from course.grading.lecture05 import _convergence
 from grading_contract import contract
 
 REFERENCES = {
@@ -13,6 +14,7 @@ REFERENCES = {
     "5.2": coverage.halfplane_pixel_area,
     "5.3": antialias.segment_pixels,
     "5.4": antialias.supersample,
+    "5.5": _convergence,
 }
 
 
@@ -65,7 +67,29 @@ def supersample(mesh, camera, face_colors, k, background=(0.0, 0.0, 0.0)):
     return color.mean(1).view(camera.height, camera.width, 3)
 
 
-SOLUTIONS = {"5.1": clip_polygon, "5.2": halfplane_pixel_area, "5.3": segment_pixels, "5.4": supersample}
+def convergence(lines, width, height, ks, jitter=False, seed=0):
+    lines = torch.as_tensor(lines, dtype=torch.float64).reshape(-1, 3)
+    exact = torch.stack([torch.stack([torch.stack([halfplane_pixel_area(line, c, r) for c in range(width)])
+                                      for r in range(height)]) for line in lines])   # (L, H, W)
+    pixels = torch.arange(width * height)
+    row, col = (pixels // width).double(), (pixels % width).double()
+    errors = []
+    for k in ks:
+        if jitter:
+            offsets = antialias.jittered_offsets(k, pixels, seed)             # (P, k², 2)
+        else:
+            u = (torch.arange(k, dtype=torch.float64) + 0.5) / k
+            offsets = torch.stack(torch.meshgrid(u, u, indexing="xy"), -1).reshape(1, -1, 2)
+        x, y = col[:, None] + offsets[..., 0], row[:, None] + offsets[..., 1]
+        s = lines[:, 0, None, None] * x + lines[:, 1, None, None] * y + lines[:, 2, None, None]
+        errors.append((((s >= 0).double().mean(-1).reshape(-1, height, width) - exact) ** 2).mean().sqrt())
+    errors = torch.stack(errors)
+    x, y = torch.log(torch.tensor(ks, dtype=torch.float64)), torch.log(errors)
+    return errors, float(((x - x.mean()) * (y - y.mean())).sum() / ((x - x.mean()) ** 2).sum())
+
+
+SOLUTIONS = {"5.1": clip_polygon, "5.2": halfplane_pixel_area, "5.3": segment_pixels, "5.4": supersample,
+             "5.5": convergence}
 
 
 # ------------------------------------------------------------------------------------------ mistakes
@@ -181,6 +205,41 @@ def supersample_via_offsets(mesh, camera, face_colors, k, background=(0.0, 0.0, 
     return color.mean(1).view(camera.height, camera.width, 3)
 
 
+def convergence_with(errors=None, exponent=None):
+    """The reference with one step changed: errors(lines, w, h, ks, jitter, seed, errors) and exponent(ks, errors)."""
+    def convergence(lines, width, height, ks, jitter=False, seed=0):
+        e, p = _convergence(lines, width, height, ks, jitter, seed)
+        e = e if errors is None else errors(lines, width, height, ks, jitter, seed, e)
+        if exponent is not None:
+            p = exponent(torch.tensor(ks, dtype=torch.float64), e)
+        return e, p
+    return convergence
+
+
+def slope(x, y):
+    return float(((x - x.mean()) * (y - y.mean())).sum() / ((x - x.mean()) ** 2).sum())
+
+
+def jitter_for_one_pixel(lines, width, height, ks, jitter, seed, e):
+    if not jitter:
+        return e
+    from course.grading.lecture05 import _exact_coverages, _sampled_coverages
+    lines = torch.as_tensor(lines).double().reshape(-1, 3)
+    exact = _exact_coverages(lines, width, height)
+    return torch.stack([((_sampled_coverages(lines, width, height, k, True, seed, pixel_index="same") - exact) ** 2)
+                        .mean().sqrt() for k in ks])
+
+
+def corners_not_centres(lines, width, height, ks, jitter, seed, e):
+    if jitter:
+        return e
+    from course.grading.lecture05 import _exact_coverages, _sampled_coverages
+    lines = torch.as_tensor(lines).double().reshape(-1, 3)
+    exact = _exact_coverages(lines, width, height)
+    return torch.stack([((_sampled_coverages(lines, width, height, k, False, seed, where="corner") - exact) ** 2)
+                        .mean().sqrt() for k in ks])
+
+
 MISTAKES = [
     ("5.1", lambda poly, line: coverage.clip_polygon(poly, -line), 0, ["you kept the wrong side"]),
     ("5.1", lambda poly, line: poly[poly @ line[:2] + line[2] >= 0], 0, ["the crossings are missing"]),
@@ -216,16 +275,27 @@ MISTAKES = [
     ("5.4", supersample_with(one_sample=True), 0, ["one sample per pixel"]),
     ("5.4", lambda m, c, f, k, background=(0.0, 0.0, 0.0): antialias.supersample(m, c, f, k).transpose(0, 1), 0,
      ["shape (8, 11, 3) expected, got (11, 8, 3)"]),
+    ("5.5", convergence_with(errors=lambda *args: args[-1] ** 2), 0, ["mean squared error", "square root"]),
+    ("5.5", convergence_with(exponent=lambda ks, e: -slope(ks.log(), e.log())), 0, ["exponent is negative"]),
+    ("5.5", convergence_with(exponent=lambda ks, e: slope(ks, e.log())), 0, ["against log(k), not against k"]),
+    ("5.5", convergence_with(exponent=lambda ks, e: slope(e.log(), ks.log())), 0, ["slope of log(k) against"]),
+    ("5.5", convergence_with(exponent=lambda ks, e: slope(ks.log(), e.log10())), 0, ["same logarithm"]),
+    ("5.5", convergence_with(errors=corners_not_centres), 1, ["cells' corners", "(a + 0.5) / k"]),
+    ("5.5", convergence_with(errors=jitter_for_one_pixel), 2, ["its own jittered samples"]),
+    ("5.5", lambda lines, width, height, ks, jitter=False, seed=0: _convergence(lines, width, height, ks, jitter,
+                                                                                 seed)[1], 0,
+     ["return a tuple (errors, exponent)"]),
 ]
 
 
-def test_lecture_05_has_four_tasks_of_three_points_each():
+def test_lecture_05_has_four_tasks_of_three_points_and_an_analysis_of_four():
     assert [(t.id, t.name, t.points) for t in tasks_for_lecture(5)] == [
         ("5.1", "clip_polygon", 3), ("5.2", "halfplane_pixel_area", 3), ("5.3", "segment_pixels", 3),
-        ("5.4", "supersample", 3)]
+        ("5.4", "supersample", 3), ("5.5", "convergence", 4)]
     assert {t.id: t.reference for t in tasks_for_lecture(5)} == {
         "5.1": ("course.coverage", "clip_polygon"), "5.2": ("course.coverage", "halfplane_pixel_area"),
-        "5.3": ("course.antialias", "segment_pixels"), "5.4": ("course.antialias", "supersample")}
+        "5.3": ("course.antialias", "segment_pixels"), "5.4": ("course.antialias", "supersample"),
+        "5.5": ("course.grading.lecture05", "_convergence")}
     assert {task for task, *_ in MISTAKES} == set(REFERENCES)               # a mistake for every task
 
 
@@ -293,3 +363,17 @@ def test_the_cameras_of_the_check_pass_the_students_copy_of_the_package(monkeypa
     exec(SUPERSAMPLE_SOURCE, namespace)
     result = run_check("5.4", namespace["supersample"])
     assert (result.points, result.message) == (3, "")
+
+
+def test_the_analysis_depends_on_the_graders_edges():
+    """5.5 is answered by running the student's function: a constant exponent fails, and the reference's
+    exponents are the lecture's: about -2 at generic slopes, -1 near the axes, -1.5 with jitter."""
+    from course.grading.lecture05 import _lines
+    generic, axes = _lines([31.7, 58.3, 121.4, 147.9], 121, 12, 9), _lines([0.4, 89.3, 179.2, 270.6], 122, 12, 9)
+    ks = [1, 2, 4, 8, 16]
+    assert -2.0 < float(_convergence(generic, 12, 9, ks)[1]) < -1.7
+    assert -1.2 < float(_convergence(axes, 12, 9, ks)[1]) < -0.9
+    assert -1.6 < float(_convergence(generic, 12, 9, ks, True)[1]) < -1.35
+    constant = lambda lines, width, height, ks, jitter=False, seed=0: (                       # noqa: E731
+        _convergence(lines, width, height, ks, jitter, seed)[0], -1.5)
+    assert run_check("5.5", constant).points == 0

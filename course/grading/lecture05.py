@@ -1,5 +1,6 @@
 """The checks of lecture 5's graded tasks (antialiasing): 5.1 clip_polygon, 5.2 halfplane_pixel_area,
-5.3 segment_pixels, 5.4 supersample.
+5.3 segment_pixels, 5.4 supersample, 5.5 convergence (an analysis: the fitted rate at which supersampling's
+error falls on the grader's edges; its reference is ``_convergence`` here, there is no package function).
 
 Each check runs the student's function next to the package's reference on fixed, seeded-random and stress
 inputs and says what to fix, recognising the typical mistakes of the task. ``import course.grading``
@@ -537,3 +538,135 @@ def _check_supersample(impl):
         return 0, message
     return grade_parts((1, "k = 2 and 4", basic), (1, "a background colour, k = 3 and 1", background),
                        (1, "slivers, faces leaving the image, float64", stress))
+
+
+# ------------------------------------------------------------------- 5.5 how fast supersampling converges
+
+def _exact_coverages(lines, width, height) -> torch.Tensor:
+    """(L, H, W) float64: every pixel's coverage by each half-plane, ``course.coverage.halfplane_pixel_area``."""
+    area = _ref("course.coverage", "halfplane_pixel_area")
+    return torch.stack([torch.stack([torch.stack([area(line, c, r) for c in range(width)]) for r in range(height)])
+                        for line in lines])
+
+
+def _sampled_coverages(lines, width, height, k, jitter, seed, where="centre", pixel_index="row") -> torch.Tensor:
+    """(L, H, W) float64: the fraction of each pixel's k × k samples with a x + b y + c >= 0; ``where`` and
+    ``pixel_index`` give the typical mistakes (samples at the cells' corners; one pixel's jitter everywhere,
+    ``"same"``; pixels numbered column-major, ``"col"``)."""
+    P = width * height
+    pixels = torch.arange(P)
+    rows, cols = (pixels // width).to(torch.float64), (pixels % width).to(torch.float64)
+    if jitter:
+        index = {"row": pixels, "col": (pixels % width) * height + pixels // width, "same": torch.zeros_like(pixels)}
+        offsets = _ref("course.antialias", "jittered_offsets")(k, index[pixel_index], seed)   # (P, S, 2)
+    else:
+        offsets = _grid(k, where).expand(P, -1, -1)                                           # (P, S, 2)
+    x, y = cols[:, None] + offsets[..., 0], rows[:, None] + offsets[..., 1]                  # (P, S)
+    a, b, c = (lines[:, i, None, None] for i in range(3))                                    # (L, 1, 1)
+    return (a * x + b * y + c >= 0).to(torch.float64).mean(-1).reshape(-1, height, width)
+
+
+def _slope(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """The least-squares slope of y against x."""
+    return ((x - x.mean()) * (y - y.mean())).sum() / ((x - x.mean()) ** 2).sum()
+
+
+def _convergence(lines, width, height, ks, jitter=False, seed=0, *, exact=None):
+    """The reference of task 5.5: (errors (K,), exponent ()), both float64. errors[i] is the RMSE over all
+    L · H · W pixels between k × k supersampled coverage (regular grid, or ``jittered_offsets`` of the flat
+    pixel indices) and the exact coverage; the exponent is the least-squares slope of log(error) on log(k).
+    ``exact``: the (L, H, W) exact coverages when already computed."""
+    lines = torch.as_tensor(lines).to(torch.float64).reshape(-1, 3)
+    exact = _exact_coverages(lines, width, height) if exact is None else exact
+    errors = torch.stack([((_sampled_coverages(lines, width, height, k, jitter, seed) - exact) ** 2).mean().sqrt()
+                          for k in ks])
+    return errors, _slope(torch.log(torch.tensor(ks, dtype=torch.float64)), torch.log(errors))
+
+
+def _convergence_variants(lines, width, height, ks, jitter, seed, exact) -> tuple[list, list]:
+    """The typical mistakes' answers: (wrong errors, explanation) and (wrong exponent, explanation)."""
+    lines = torch.as_tensor(lines).to(torch.float64).reshape(-1, 3)
+    logk = torch.log(torch.tensor(ks, dtype=torch.float64))
+    diffs = [_sampled_coverages(lines, width, height, k, jitter, seed) - exact for k in ks]
+    errors = torch.stack([(d ** 2).mean().sqrt() for d in diffs])
+    crossed = ((exact > 0) & (exact < 1)).to(torch.float64).mean().clamp_min(1e-12)
+    wrong_errors = [
+        (errors / crossed.sqrt(), "the RMSE is over every pixel of every image (L · height · width of them), not "
+         "only over the pixels the edges cross"),
+        (errors ** 2, "that is the mean squared error: take its square root (the RMSE)"),
+        (torch.stack([d.abs().mean() for d in diffs]), "that is the mean absolute error: the task asks for the "
+         "root of the mean squared error (RMSE)")]
+    if jitter:
+        for how, explanation in (("same", "every pixel has its own jittered samples: pass every pixel's flat index "
+                                  "to antialias.jittered_offsets, not one pixel's samples for all"),
+                                 ("col", "pixel (row, col) has the flat index row * width + col (row-major)")):
+            wrong = [_sampled_coverages(lines, width, height, k, True, seed, pixel_index=how) - exact for k in ks]
+            wrong_errors.append((torch.stack([(d ** 2).mean().sqrt() for d in wrong]), explanation))
+    else:
+        corner = [_sampled_coverages(lines, width, height, k, False, seed, where="corner") - exact for k in ks]
+        wrong_errors.append((torch.stack([(d ** 2).mean().sqrt() for d in corner]), "the samples sit at the cells' "
+                             "corners: sample (a, b) of the regular grid lies at ((a + 0.5) / k, (b + 0.5) / k)"))
+    loge = torch.log(errors)
+    p = _slope(logk, loge)
+    wrong_exponents = [
+        (-p, "the exponent is negative when the error falls as k grows: the slope of log(error) against log(k)"),
+        (_slope(torch.tensor(ks, dtype=torch.float64), loge), "fit log(error) against log(k), not against k"),
+        (_slope(loge, logk), "that is the slope of log(k) against log(error): fit log(error) = log(C) + p log(k), "
+         "with the error on the vertical axis"),
+        (_slope(logk, loge / math.log(10)), "use the same logarithm on both axes (natural or base 10)"),
+        (_slope(logk / math.log(10), loge), "use the same logarithm on both axes (natural or base 10)"),
+        (_slope(logk, 2 * loge), "that is the exponent of the mean squared error: fit the RMSE's logarithm")]
+    return wrong_errors, wrong_exponents
+
+
+def _run_convergence(impl, lines, width, height, ks, jitter, seed, what):
+    name = f"convergence({what})"
+    out = _call(impl, lines, width, height, list(ks), jitter, seed)
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        raise Fail(f"{name}: return a tuple (errors, exponent), got {type(out).__name__}")
+    errors = to_tensor(out[0], f"{name} errors")
+    try:
+        exponent = torch.as_tensor(float(out[1]), dtype=torch.float64)
+    except (TypeError, ValueError, RuntimeError):
+        raise Fail(f"{name}: the exponent should be one number, got {type(out[1]).__name__}") from None
+    exact = _exact_coverages(torch.as_tensor(lines).to(torch.float64).reshape(-1, 3), width, height)
+    expected_errors, expected_exponent = _convergence(lines, width, height, ks, jitter, seed, exact=exact)
+    wrong_errors, wrong_exponents = _convergence_variants(lines, width, height, ks, jitter, seed, exact)
+    require(_diagnose(errors, expected_errors, f"{name} errors", wrong_errors, atol=1e-12, rtol=1e-6))
+    require(_diagnose(exponent, expected_exponent, f"{name} exponent", wrong_exponents, atol=1e-6, rtol=1e-6))
+
+
+def _lines(angles_deg, seed, width, height, dtype=torch.float64) -> torch.Tensor:
+    """(L, 3) lines at the given angles (degrees from the x axis) through seeded points inside the image."""
+    g = generator(seed)
+    out = []
+    for angle in angles_deg:
+        x, y = (torch.rand(2, generator=g, dtype=torch.float64) * 0.6 + 0.2) * torch.tensor([width, height])
+        a, b = -math.sin(math.radians(angle)), math.cos(math.radians(angle))      # the normal of the direction
+        out.append([a, b, -(a * float(x) + b * float(y))])
+    return torch.tensor(out, dtype=torch.float64).to(dtype)
+
+
+@task("5.5", "convergence", points=4, reference=("course.grading.lecture05", "_convergence"))
+def _check_convergence(impl):
+    W, H = 12, 9                                                           # not square: rows and columns differ
+
+    def generic():
+        _run_convergence(impl, _lines([31.7, 58.3, 121.4, 147.9], 121, W, H), W, H, [1, 2, 4, 8, 16], False, 0,
+                         "four edges at generic slopes, regular grid, k = 1 … 16")
+
+    def near_axes():
+        _run_convergence(impl, _lines([0.4, 89.3, 179.2, 270.6], 122, W, H), W, H, [2, 4, 8, 16], False, 0,
+                         "four edges within a degree of an axis, regular grid, k = 2 … 16")
+
+    def jittered():
+        lines = _lines([12.5, 67.0, 103.3, 161.8, 45.5], 123, W, H)
+        for seed in (0, 3):
+            _run_convergence(impl, lines, W, H, [1, 2, 4, 8], True, seed, f"five edges, jitter=True, seed={seed}")
+
+    def stress():
+        _run_convergence(impl, _lines([23.0, 77.7], 124, W, H, torch.float32), W, H, [3, 5, 7, 12], False, 0,
+                         "k not powers of two, float32 lines")
+        _run_convergence(impl, _lines([38.2], 125, 7, 5), 7, 5, [1, 3, 9], True, 7, "one edge, 7 × 5 pixels, jitter")
+    return grade_parts((1, "edges at generic slopes", generic), (1, "edges near the axes", near_axes),
+                       (1, "stratified jitter", jittered), (1, "other k, float32, one edge", stress))

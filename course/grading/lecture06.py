@@ -1,22 +1,26 @@
-"""The checks of lecture 6's graded tasks (shadow maps): 6.1 light_space, 6.2 biased_lit, 6.3 pcf.
+"""The checks of lecture 6's graded tasks (shadow maps): 6.1 light_space, 6.2 depth_bias, 6.3 pcf, 6.4 acne_bias.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``; nothing here is public.
 
-References: the three building blocks ``course.shadows.shadow_factor`` is made of, each called with the
-student's signature: 6.1 ``course.shadows.light_space`` (``project_points`` with its two results side by
-side, the lookup of pass 2), 6.2 ``course.shadows.biased_lit`` (the comparison with the two-part bias), 6.3
-``course.shadows.pcf`` (the k×k filter; a neighbour outside the map is lit). ``_light_space_variants``,
-``_lit_variants`` and ``_pcf_mistake`` give the typical mistakes' answers, to say what went wrong. A graded
-function that reaches its reference, or another package function doing the task's work (``project_points``,
-``shadow_factor`` ...), scores 0.
+References: 6.1 ``course.shadows.light_space`` (``project_points`` with its two results side by side, the
+lookup of pass 2); 6.2 the two-part bias as ``shadow_factor`` computes it (the texel's world width, tan θ
+from the normal and the direction to the light, clamped; ``_depth_bias`` here, which the task's reference
+``course.shadows.biased_depth`` completes); 6.3 ``course.shadows.pcf`` (the k×k filter; a neighbour outside
+the map is lit); 6.4, an analysis, ``_acne_bias`` here: the smallest constant bias that leaves every given
+point fully lit under k×k PCF, found by the student's function on the grader's maps. ``_light_space_variants``,
+``_bias_variants``, ``_pcf_mistake`` and ``_acne_variants`` give the typical mistakes' answers, to say what
+went wrong. A graded function that reaches its reference, or another package function doing the task's work
+(``project_points``, ``shadow_factor`` ...), scores 0.
 """
 from __future__ import annotations
 
+import math
+
 import torch
 
-from .helpers import _call, _diagnose, _ref, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _close, _diagnose, _ref, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
@@ -118,87 +122,96 @@ def _check_light_space(impl):
     return grade_parts((1, "orthographic", ortho), (1, "perspective", persp), (1, "stress", stress))
 
 
-# --------------------------------------------------------------------------- 6.2 the biased comparison
+# --------------------------------------------------------------------------- 6.2 the two-part bias
 
-def _biased_lit(z, stored, texel, tan_theta, bias, slope_bias):
-    """The reference, ``course.shadows.biased_lit``: lit where ``not (z - total > stored)``, total = bias +
-    slope_bias * texel * tan θ (so a stored +inf, an empty texel, is lit)."""
-    return _ref("course.shadows", "biased_lit")(z, stored, texel, tan_theta, bias, slope_bias)
-
-
-def _lit_variants(z, stored, texel, tan_theta, bias, slope_bias) -> list:
-    return [(~(z > stored), "the bias is missing: compare z - (bias + slope_bias * texel * tan θ) with the stored "
-             "depth"),
-            (~(z + bias + slope_bias * texel * tan_theta > stored), "the bias is added: subtract it, moving the "
-             "point toward the light"),
-            (z - bias - slope_bias * texel * tan_theta < stored, "a point exactly at the stored depth (after the "
-             "bias) is lit: shadowed only when z - bias > stored (use <=, not <)"),
-            (~(z - bias - slope_bias * tan_theta > stored), "the slope term is in texels: multiply it by the "
-             "texel's world width, slope_bias * texel * tan θ"),
-            (~(z - slope_bias * texel * tan_theta > stored), "the constant bias is missing: add bias to the slope "
-             "term"),
-            (~(z - bias > stored), "the slope-scaled term is missing: the total bias is bias + slope_bias * texel "
-             "* tan θ"),
-            (z - bias - slope_bias * texel * tan_theta > stored, "that is 'shadowed': return True where the point "
-             "is lit")]
+def _depth_bias(z, normals, to_light, fx, orthographic, bias, slope_bias, max_slope):
+    """The reference: ``bias + slope_bias * texel * tan θ`` (N,) in z's dtype, texel = 1 / fx (orthographic) or
+    z / fx (perspective), tan θ between the normal's line and the direction to the light, clamped to max_slope
+    (``course.shadows``' slope term, as ``shadow_factor`` computes it)."""
+    with torch.no_grad():
+        tan = _ref("course.shadows", "_tan_theta")(normals, to_light, float(max_slope))
+        texel = torch.full_like(z, 1.0 / fx) if orthographic else z / fx
+        return _ref("course.shadows", "biased_depth")(torch.zeros_like(z), texel, tan, bias, slope_bias).neg()
 
 
-def _run_lit(impl, args, what):
-    name = f"biased_lit ({what})"
+def _bias_variants(z, normals, to_light, fx, orthographic, bias, slope_bias, max_slope) -> list:
+    z64, n, l = z.to(torch.float64), normals.to(torch.float64), to_light.to(torch.float64)
+    dot = (n * l).sum(-1)
+    norms = n.norm(dim=-1) * l.norm(dim=-1)
+    cos = dot.abs() / norms
+    sin = (1 - cos * cos).clamp_min(0).sqrt()
+    texel = torch.full_like(z64, 1.0 / fx) if orthographic else z64 / fx
+    tan = (sin / cos).clamp(max=max_slope)
+    signed_cos = dot / norms
+    signed_tan = torch.where(signed_cos != 0, (1 - signed_cos ** 2).clamp_min(0).sqrt() / signed_cos,
+                             torch.full_like(z64, math.inf)).clamp(max=max_slope)
+    raw_cos = dot.abs().clamp(max=1)
+    raw_tan = ((1 - raw_cos ** 2).clamp_min(0).sqrt() / raw_cos).clamp(max=max_slope)
+    total = lambda t=tan, w=texel, b=bias: b + slope_bias * w * t                            # noqa: E731
+    other = z64 / fx if orthographic else torch.full_like(z64, 1.0 / fx)
+    return [(total(t=sin / cos), "clamp tan θ to max_slope: at grazing light it has no bound"),
+            (total(w=other), "an orthographic light's texel has the same world width everywhere, 1 / fx" if orthographic
+             else "a perspective light's texel grows with depth: its world width at the point is z / fx"),
+            (total(t=signed_tan), "a normal may point either way: use |n · l| for cos θ"),
+            (total(t=raw_tan), "normalise: cos θ = |n · l| / (|n| |l|) (normals and directions need not be unit)"),
+            (total(t=sin.clamp(max=max_slope)), "a surface tilted by θ changes depth by texel · tan θ across a "
+             "texel: tan θ, not sin θ"),
+            (total(b=0.0), "the constant bias is missing: the total is bias + slope_bias · texel · tan θ"),
+            (bias + slope_bias * tan, "the slope term is in texels: multiply by the texel's world width at the point"),
+            (z64 - total(), "return the total bias, not the biased depth z - bias")]
+
+
+def _run_bias(impl, args, what):
+    name = f"depth_bias ({what})"
+    z = args[0]
     got = to_tensor(_call(impl, *args), name)
-    expected = _biased_lit(*args)
+    expected = _depth_bias(*args)
     if got.shape != expected.shape:
-        require(f"{name}: return an (N,) bool tensor, shape {tuple(expected.shape)} expected, got {tuple(got.shape)}")
-    if got.dtype != torch.bool:
-        require(f"{name}: return a bool tensor (True where lit), got dtype {str(got.dtype).replace('torch.', '')}")
-    if torch.equal(got, expected):
-        return
-    explanations = {e for alternative, e in _lit_variants(*args)
-                    if torch.equal(got, alternative) and not torch.equal(expected, alternative)}
-    if len(explanations) == 1:                                         # one mistake, and only one, gives this
-        require(f"{name}: {explanations.pop()}")
-    require(compare(got, expected, name=name))
+        require(f"{name}: return one bias per point, shape {tuple(expected.shape)} expected, got {tuple(got.shape)}")
+    tol = {} if z.dtype == torch.float64 else dict(atol=1e-5, rtol=1e-4)
+    require(_diagnose(got, expected, name, _bias_variants(*args), check_dtype=True, **tol))
 
 
-def _lit_case(n, seed, dtype, bias=0.02, slope_bias=1.5):
+def _bias_case(n, seed, dtype, orthographic, fx, spread=1.2, flip=False, scale=False):
     g = generator(seed)
-    u = lambda: torch.rand(n, generator=g, dtype=torch.float64)          # noqa: E731
-    stored = 2 + 2 * u()
-    texel = 0.01 + 0.04 * u()
-    tan_theta = 3 * u()
-    z = stored + (u() - 0.5) * 4 * (bias + slope_bias * texel * tan_theta)   # around the threshold
-    return tuple(x.to(dtype) for x in (z, stored, texel, tan_theta)) + (bias, slope_bias)
+    u = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)        # noqa: E731
+    to_light = torch.tensor([0.3, 1.0, -0.2], dtype=torch.float64) + 0.2 * (u(n, 3) - 0.5)
+    normals = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64) + spread * (u(n, 3) - 0.5)
+    if flip:
+        normals[::3] *= -1                                                  # seen from the other side
+    if scale:
+        normals = normals * (0.2 + 3 * u(n, 1))
+        to_light = to_light * (0.5 + 4 * u(n, 1))
+    z = 2 + 3 * u(n)
+    return tuple(x.to(dtype) for x in (z, normals, to_light)) + (fx, orthographic)
 
 
-@task("6.2", "biased_lit", points=3, reference=("course.shadows", "biased_lit"))
-def _check_biased_lit(impl):
-    require(forbidden_call(impl, "biased_lit", [("course.shadows", "shadow_factor"),
-                                                ("course.shadows", "biased_depth"), ("course.shadows", "pcf")]))
+@task("6.2", "depth_bias", points=3, reference=("course.shadows", "biased_depth"))
+def _check_depth_bias(impl):
+    require(forbidden_call(impl, "depth_bias", [("course.shadows", "shadow_factor"),
+                                                ("course.shadows", "_tan_theta")]))
 
-    def basic():
-        _run_lit(impl, _lit_case(200, 71, torch.float64), "points near the threshold, bias 0.02, slope_bias 1.5")
-        _run_lit(impl, _lit_case(100, 72, torch.float64, 0.0, 3.0), "bias 0, slope_bias 3")
+    def orthographic():
+        _run_bias(impl, _bias_case(60, 71, torch.float64, True, 40.0) + (0.01, 1.5, 10.0),
+                  "a directional light, fx = 40, bias 0.01, slope_bias 1.5, max_slope 10")
 
-    def edges():
-        f64 = lambda v: torch.tensor(v, dtype=torch.float64)              # noqa: E731
-        z = f64([1.0, 1.5, 2.0, 3.0, 0.5, 1.25, 1.1, 1.2])
-        stored = f64([1.0, 1.0, float("inf"), 2.75, 1.0, 1.0, 1.0, 1.0])
-        texel = f64([0.125, 0.125, 0.125, 0.125, 0.125, 0.125, 0.125, 0.125])
-        tan = f64([0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.5])
-        _run_lit(impl, (z, stored, texel, tan, 0.25, 1.0), "exactly at the threshold, an empty texel (+inf), "
-                 "bias 0.25, slope_bias 1")
-        _run_lit(impl, (z, stored, texel, tan, 0.0, 0.0), "no bias at all: z <= stored is lit")
+    def perspective():
+        _run_bias(impl, _bias_case(60, 72, torch.float64, False, 128.0, flip=True, scale=True) + (0.002, 2.0, 5.0),
+                  "a spot light, fx = 128, normals of any length and either side, bias 0.002, slope_bias 2")
 
     def stress():
-        _run_lit(impl, _lit_case(100, 73, torch.float32), "float32")
-        z, stored, texel, tan, _, _ = _lit_case(100, 74, torch.float64, 1e-7, 0.5)
-        _run_lit(impl, (z * 1e4, stored * 1e4, texel, tan, 1e-3, 0.5), "depths around 1e4, float64")
-        empty = torch.zeros(0, dtype=torch.float64)
-        got = to_tensor(_call(impl, empty, empty, empty, empty, 0.1, 1.0), "biased_lit (no points)")
+        f64 = lambda v: torch.tensor(v, dtype=torch.float64)              # noqa: E731
+        normals = f64([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.05, 0.0], [0.0, -2.0, 0.0], [1.0, 1.0, 0.0]])
+        to_light = f64([[0.0, 1.0, 0.0]] * 5)
+        _run_bias(impl, (f64([3.0, 3.0, 3.0, 3.0, 3.0]), normals, to_light, 64.0, True, 0.0, 1.0, 10.0),
+                  "grazing light (n · l = 0), steeper than max_slope, facing, from below, 45°")
+        _run_bias(impl, _bias_case(40, 73, torch.float32, False, 90.0, spread=3.0) + (0.005, 1.5, 4.0), "float32")
+        empty, none = torch.zeros(0, dtype=torch.float64), torch.zeros(0, 3, dtype=torch.float64)
+        got = to_tensor(_call(impl, empty, none, none, 64.0, True, 0.01, 1.5, 10.0), "depth_bias (no points)")
         if got.shape != (0,):
-            require(f"biased_lit (no points): return shape (0,), got {tuple(got.shape)}")
+            require(f"depth_bias (no points): return shape (0,), got {tuple(got.shape)}")
 
-    return grade_parts((1, "near the threshold", basic), (1, "edge cases", edges), (1, "stress", stress))
+    return grade_parts((1, "orthographic", orthographic), (1, "perspective", perspective), (1, "stress", stress))
 
 
 # ------------------------------------------------------------------------- 6.3 percentage-closer filtering
@@ -316,3 +329,103 @@ def _check_pcf(impl):
 
     return grade_parts((1, "k = 1 and 3", one_and_three), (1, "k = 5, borders, a wide window", five_and_borders),
                        (1, "stress", stress))
+
+
+# ------------------------------------------------------------------ 6.4 how much bias acne needs (an analysis)
+
+def _acne_bias(depth_map, coords, depths, k, *, window="centred", swap=False, own_texel=False, reduce="max",
+               clamp=True):
+    """The reference of task 6.4: the smallest constant b >= 0 with ``pcf(depth_map, coords, depths - b, k) == 1``
+    at every point, a 0-d tensor in depth_map's dtype: the largest ``depth - stored`` over the points and the
+    k×k texels of their windows inside the map (a neighbour outside is lit whatever b is), or 0. The keyword
+    switches give the typical mistakes' answers."""
+    H, W = depth_map.shape
+    d = torch.as_tensor(depths).to(depth_map.dtype)
+    row, col = coords[:, 1].floor().long(), coords[:, 0].floor().long()
+    if swap:
+        row, col = col, row
+    r = (k - 1) // 2
+    offsets = [0] if own_texel else (list(range(-r, r + 1)) if window == "centred" else list(range(k)))
+    need = torch.full(d.shape, -math.inf, dtype=depth_map.dtype)
+    for dy in offsets:
+        for dx in offsets:
+            rr, cc = row + dy, col + dx
+            inside = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W)
+            stored = depth_map[rr.clamp(0, H - 1), cc.clamp(0, W - 1)]
+            need = torch.maximum(need, torch.where(inside, d - stored, torch.full_like(need, -math.inf)))
+    if reduce == "mean":
+        finite = need[torch.isfinite(need)]
+        worst = finite.mean() if finite.numel() else torch.zeros((), dtype=depth_map.dtype)
+    else:
+        worst = need.max() if need.numel() else torch.tensor(-math.inf, dtype=depth_map.dtype)
+    if clamp:
+        return worst.clamp_min(0)
+    return worst if torch.isfinite(worst) else torch.zeros((), dtype=depth_map.dtype)
+
+
+def _acne_variants(depth_map, coords, depths, k) -> list:
+    v = lambda **how: _acne_bias(depth_map, coords, depths, k, **how)        # noqa: E731
+    return [(v(own_texel=True), "PCF compares the point with every texel of its k × k window: the bias must "
+             "cover the farthest of them, not only the point's own texel"),
+            (v(swap=True), "rows and columns are swapped: coords are (x, y), the texel is row floor(y), column "
+             "floor(x)"),
+            (v(window="corner"), "the window is centred on the point's texel: offsets -(k - 1) / 2 … (k - 1) / 2"),
+            (v(reduce="mean"), "the bias must light every point: take the largest need, not the mean"),
+            (v(clamp=False), "the bias is never negative: when every point is already lit, the smallest bias is 0")]
+
+
+def _run_acne(impl, depth_map, coords, depths, k, what):
+    name = f"acne_bias (k = {k}, {what})"
+    got = to_tensor(_call(impl, depth_map, coords, depths, k), name)
+    expected = _acne_bias(depth_map, coords, depths, k)
+    if got.dim() != 0:
+        require(f"{name}: return one number (a 0-d tensor), the bias for all points, got shape {tuple(got.shape)}")
+    tol = {} if depth_map.dtype == torch.float64 else dict(atol=1e-5, rtol=1e-5)
+    variants = _acne_variants(depth_map, coords, depths, k)
+    telling = [(v, e) for v, e in variants if sum(_close(v, w) for w, _ in variants) == 1]   # one mistake gives it
+    require(_diagnose(got, expected, name, telling, check_dtype=True, **tol))
+
+
+def _plane_case(light_dir, resolution, n, seed):
+    """A 4 × 4 ground under a tilted directional light, its shadow map, and n seeded points on it in light space."""
+    from course.models import plane
+    from course.shading import DirectionalLight
+    from course.shadows import light_space, shadow_map
+    sm = shadow_map(plane(4.0, dtype=torch.float64), DirectionalLight(light_dir), resolution)
+    g = generator(seed)
+    p = torch.rand(n, 2, generator=g, dtype=torch.float64) * 3.6 - 1.8
+    pts = torch.stack([p[:, 0], torch.zeros(n, dtype=torch.float64), p[:, 1]], 1)
+    xyz = light_space(pts, sm.camera)
+    return sm.depth[0], xyz[:, :2], xyz[:, 2]
+
+
+@task("6.4", "acne_bias", points=4, reference=("course.grading.lecture06", "_acne_bias"))
+def _check_acne_bias(impl):
+    def one():
+        depth, coords, depths = _pcf_case(9, 12, 60, 91, torch.float64)
+        _run_acne(impl, depth, coords, depths, 1, "a random 9 × 12 map, float64")
+
+    def windows():
+        depth, coords, depths = _pcf_case(10, 8, 50, 92, torch.float64)
+        for k in (3, 5):
+            _run_acne(impl, depth, coords, depths, k, "a random 10 × 8 map with empty texels, float64")
+
+    def planes():
+        for light, res, seed in (((1.0, -1.0, 0.3), 64, 93), ((0.2, -1.0, -0.7), 48, 94)):
+            depth, coords, depths = _plane_case(light, res, 400, seed)
+            for k in (1, 3, 5):
+                _run_acne(impl, depth, coords, depths, k, f"a ground under a light along {light}, {res} texels")
+
+    def stress():
+        depth, coords, depths = _pcf_case(6, 7, 30, 95, torch.float64)
+        _run_acne(impl, depth, coords, depths - 5.0, 3, "every point already lit")
+        edge = torch.tensor([[0.0, 0.0], [6.999, 5.999], [0.5, 3.5], [3.0, 0.25]], dtype=torch.float64)
+        _run_acne(impl, depth, edge, torch.full((4,), 1.9, dtype=torch.float64), 3, "points on the map's borders")
+        _run_acne(impl, depth, edge, torch.full((4,), 1.9, dtype=torch.float64), 9, "a window wider than the map")
+        d32, c32, z32 = _pcf_case(8, 8, 40, 96, torch.float32)
+        _run_acne(impl, d32, c32, z32, 3, "float32")
+        none = torch.zeros(0, 2, dtype=torch.float64)
+        _run_acne(impl, depth, none, torch.zeros(0, dtype=torch.float64), 3, "no points")
+
+    return grade_parts((1, "k = 1", one), (1, "k = 3 and 5", windows), (1, "tilted grounds", planes),
+                       (1, "lit already, borders, float32, no points", stress))
