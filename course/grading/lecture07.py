@@ -1,13 +1,18 @@
-"""The checks of lecture 7's graded tasks (ray tracing): 7.1 ray_triangle, 7.2 ray_aabb, 7.3 shadow_ray.
+"""The checks of lecture 7's graded tasks (ray tracing): 7.1 ray_triangle, 7.2 ray_aabb, 7.3 shadow_ray,
+7.4 bvh_closest_hit, 7.5 area_light, 7.6 error_slope.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``; nothing here is public.
 
-References: 7.1 is ``course.raytrace.intersect_triangles`` with the hits behind the origin (t <= 0) removed;
+References: 7.1 is ``course.intersect.moller_trumbore`` with the hits behind the origin (t <= 0) removed;
 7.2 is ``course.raytrace.ray_box`` (``_slab_reference``, in float64); 7.3 is brute force over every
 triangle with ``intersect_triangles`` (``_shadow_reference``), the same answer as ``course.raytrace.visible``
-on these scenes. A function that reaches a package function doing the task's work scores 0 and is told so.
+on these scenes; 7.4 is ``BVH.intersect`` (the closest hit, t > 0); 7.5 is the area-light estimator written
+here (``_area_reference``: visibility by brute force, each sample weighted by cos θ cos θ′ / r²); 7.6 is the
+least-squares slope of log RMSE against log S (``_slope_reference``), run on estimators written here whose
+exact answer is known (``_occluded_light``). A function that reaches a package function doing the task's work
+scores 0 and is told so.
 """
 from __future__ import annotations
 
@@ -15,7 +20,7 @@ import math
 
 import torch
 
-from .helpers import _call, _ref, _unpack, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _close, _ref, _unpack, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__: list[str] = []          # nothing public: the checks are reached through course.grading.TASKS
@@ -30,7 +35,7 @@ def _mismatch(got: torch.Tensor, expected: torch.Tensor, where: torch.Tensor) ->
 # ---------------------------------------------------------------------------------- 7.1 ray–triangle
 
 def _triangle_reference(o, d, tris):
-    t, bary, hit = _ref("course.raytrace", "intersect_triangles")(o, d, tris)
+    t, bary, hit = _ref("course.intersect", "moller_trumbore")(o, d, tris)
     hit = hit & (t > 0)
     return torch.where(hit, t, torch.full_like(t, math.inf)), hit, t, bary
 
@@ -119,9 +124,9 @@ def _parallel_rays(dtype=torch.float64):
     return f(o), f(d), f([tri] * len(o))
 
 
-@task("7.1", "ray_triangle", points=3, reference=("course.intersect", "intersect_triangles"))
+@task("7.1", "ray_triangle", points=3, reference=("course.intersect", "moller_trumbore"))
 def _check_ray_triangle(impl):
-    forbidden = forbidden_call(impl, "ray_triangle", [("course.intersect", "moller_trumbore"),
+    forbidden = forbidden_call(impl, "ray_triangle", [("course.intersect", "intersect_triangles"),
                                                   ("course.bvh", "BVH")])
     if forbidden:
         return 0, forbidden
@@ -230,7 +235,7 @@ def _axis_rays(dtype=torch.float64):
     return f(o), f(d), f([[0.0, 0.0, 0.0]] * n), f([[1.0, 1.0, 1.0]] * n)
 
 
-@task("7.2", "ray_aabb", points=3, reference=("course.intersect", "ray_box"))
+@task("7.2", "ray_aabb", points=2, reference=("course.intersect", "ray_box"))
 def _check_ray_aabb(impl):
     forbidden = forbidden_call(impl, "ray_aabb", [("course.intersect", "_slab"), ("course.bvh", "BVH")])
     if forbidden:
@@ -249,8 +254,10 @@ def _check_ray_aabb(impl):
         require(_slab_problem(impl, *_axis_rays(), "zero components, origins on slab planes, inside, behind"))
         o, d, lo, hi = _random_boxes(32, 76, torch.float64)
         require(_slab_problem(impl, o * 1e4, d * 1e-3, lo * 1e4, hi * 1e4, "large boxes, short directions"))
-    return grade_parts((1, "random rays and boxes", random),
-                       (1, "negative direction components", negative),
+    def basic():
+        random()
+        negative()
+    return grade_parts((1, "random rays and boxes, negative direction components", basic),
                        (1, "zero direction components, origins on a slab plane, inside and behind", stress))
 
 
@@ -311,7 +318,7 @@ def _shadow_scene(dtype=torch.float64):
     return tris
 
 
-@task("7.3", "shadow_ray", points=3, reference=("course.raytrace", "visible"))
+@task("7.3", "shadow_ray", points=2, reference=("course.raytrace", "visible"))
 def _check_shadow_ray(impl):
     forbidden = forbidden_call(impl, "shadow_ray", [("course.bvh", "BVH"),
                                                 ("course.intersect", "moller_trumbore")])
@@ -351,7 +358,311 @@ def _check_shadow_ray(impl):
                                 "points on a tilted triangle", on_surface=torch.ones(32, dtype=torch.bool)))
         v = tris[2:, :, :].reshape(-1, 3)                                  # the occluders' own corners
         require(_shadow_problem(impl, v, torch.tensor([0.3, 5.0, 0.2], dtype=torch.float64), tris,
-                                "points at the occluders' corners", on_surface=torch.ones(v.shape[0], dtype=torch.bool)))
-    return grade_parts((1, "points under an occluder", above),
-                       (1, "occluders beyond the light and behind the point", beyond),
+                                "points at the occluders' corners",
+                                on_surface=torch.ones(v.shape[0], dtype=torch.bool)))
+    def segment():
+        above()
+        beyond()
+    return grade_parts((1, "points under an occluder, occluders beyond the light and behind the point", segment),
                        (1, "points on surfaces and at vertices (self-shadowing), float64", surface))
+
+
+# ------------------------------------------------------------------------ 7.4 BVH traversal with a stack
+
+class _Tree:
+    """The flat tensors of a ``course.bvh.BVH``, and nothing else (no method that would do the traversal)."""
+
+    def __init__(self, bvh):
+        self.boxes, self.left, self.first, self.count = bvh.boxes, bvh.left, bvh.first, bvh.count
+        self.order, self.tris = bvh.order, bvh.tris
+
+
+def _two_spheres():
+    """Two icospheres, one in front of the other (so the first leaf hit is often not the nearest), float64."""
+    icosphere, mesh = _ref("course.models", "icosphere"), _ref("course.mesh", "Mesh")
+    a = icosphere(2, radius=0.8, dtype=torch.float64)
+    b = icosphere(1, radius=0.5, dtype=torch.float64)
+    verts = torch.cat([a.verts + torch.tensor([0.3, 0.0, 0.0], dtype=torch.float64),
+                       b.verts + torch.tensor([-0.4, 0.2, 1.2], dtype=torch.float64)])
+    faces = torch.cat([a.faces, b.faces + a.verts.shape[0]])
+    return mesh(verts, faces)
+
+
+def _traversal_rays(n, seed, inside=False):
+    g = generator(seed)
+    r = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)     # noqa: E731
+    if inside:                                                            # from inside the big sphere
+        o = (r(n, 3) * 2 - 1) * 0.3 + torch.tensor([0.3, 0.0, 0.0], dtype=torch.float64)
+        d = r(n, 3) * 2 - 1
+    else:                                                                 # from outside, aimed near the spheres
+        o = (r(n, 3) * 2 - 1) * 0.5 + torch.tensor([0.0, 0.0, 4.0], dtype=torch.float64)
+        d = (r(n, 3) * 2 - 1) * torch.tensor([1.2, 1.2, 0.5], dtype=torch.float64) - torch.tensor([0, 0, 4.0],
+                                                                                               dtype=torch.float64)
+    return o, d
+
+
+def _traversal_problem(impl, bvh, o, d, label) -> str | None:
+    name = f"bvh_closest_hit({label})"
+    hits = bvh.intersect(o, d, t_min=0.0)
+    t_exp, f_exp = hits.t, hits.face_id
+    t_got, f_got = _unpack(_call(impl, o, d, _Tree(bvh)), ("t", "face_id"), "bvh_closest_hit")
+    for got, exp, what in ((t_got, t_exp, "t"), (f_got, f_exp, "face_id")):
+        if got.shape != exp.shape:
+            return f"{name} {what}: shape {tuple(exp.shape)} expected, got {tuple(got.shape)}"
+    if f_got.dtype != torch.int64:
+        return f"{name} face_id: return an int64 tensor (the face id, -1 on a miss), got {str(f_got.dtype)[6:]}"
+    if not torch.equal(f_got, f_exp):
+        wrong = f_got != f_exp
+        n = int(wrong.sum())
+        got_hit, exp_hit = f_got >= 0, f_exp >= 0
+        slot = torch.full_like(f_exp, -1)
+        slot[exp_hit] = bvh._slot[f_exp[exp_hit]]
+        if torch.equal(f_got, slot) and not torch.equal(slot, f_exp):
+            return (f"{name}: face_id holds the triangle's slot in tree.tris, not its face id: the face of slot s "
+                    "is tree.order[s]")
+        if bool((wrong & exp_hit & ~got_hit).sum() == n):
+            return (f"{name}: {n} rays that hit the mesh miss: a ray can meet both children's boxes, so push both "
+                    "(the box the ray enters first is not always the one with the nearest hit)")
+        if bool((wrong & got_hit & exp_hit).sum() == n):
+            farther = bool((t_got[wrong] > t_exp[wrong]).all())
+            if farther:
+                return (f"{name}: {n} rays return a hit that is not the nearest: do not stop at the first leaf with "
+                        "a hit; keep popping, and skip only the boxes the ray enters beyond the closest hit so far")
+        bad = int(wrong.nonzero()[0, 0])
+        return (f"{name} face_id: {n} of {f_exp.numel()} rays wrong (first: ray {bad}, got {int(f_got[bad])}, "
+                f"expected {int(f_exp[bad])})")
+    if bool((~(f_exp >= 0)).any()) and not bool((torch.isinf(t_got[f_exp < 0]) & (t_got[f_exp < 0] > 0)).all()):
+        return f"{name} t: where a ray misses, t must be +inf"
+    return compare(t_got, t_exp, name=f"{name} t", check_dtype=False)
+
+
+@task("7.4", "bvh_closest_hit", points=5, reference=("course.bvh", "BVH.intersect"))
+def _check_bvh_closest_hit(impl):
+    forbidden = forbidden_call(impl, "bvh_closest_hit", [("course.bvh", "BVH"), ("course.raytrace", "raycast"),
+                                                         ("course.intersect", "intersect_triangles"),
+                                                         ("course.intersect", "moller_trumbore")])
+    if forbidden:
+        return 0, forbidden
+    bvh = _ref("course.bvh", "BVH")(_two_spheres())
+
+    def outside():
+        require(_traversal_problem(impl, bvh, *_traversal_rays(40, 81), "40 rays at two spheres"))
+
+    def nearest():
+        o, d = _traversal_rays(40, 82)
+        o = o * torch.tensor([1.0, 1.0, -1.0], dtype=torch.float64)    # from behind: the big sphere first
+        d = d * torch.tensor([1.0, 1.0, -1.0], dtype=torch.float64)
+        require(_traversal_problem(impl, bvh, o, d, "40 rays from the other side"))
+
+    def inside():
+        require(_traversal_problem(impl, bvh, *_traversal_rays(40, 83, inside=True), "40 rays from inside a sphere"))
+        small = _ref("course.bvh", "BVH")(_two_spheres(), leaf_size=1)
+        require(_traversal_problem(impl, small, *_traversal_rays(24, 84), "a BVH with one face per leaf"))
+    return grade_parts((2, "rays from outside at two spheres", outside),
+                       (2, "the nearest hit when the first leaf reached holds a farther one", nearest),
+                       (1, "rays from inside a sphere, a tree with one face per leaf", inside))
+
+
+# ----------------------------------------------------------------------------- 7.5 an area light's light
+
+def _area_reference(points, normals, samples, light_normal, area, tris, *, cos_light=True, inv_r2=True,
+                    scale=True, clamp=True, shadows=True):
+    """E (N,) = A / S Σ_s V cos θ cos θ′ / r², radiance 1, float64; the keywords switch off one piece each
+    (the typical mistakes). V by brute force, blocked by hits at EPS < t < 1 - EPS on the segment."""
+    p, n, y, nl, T = (x.to(torch.float64) for x in (points, normals, samples, light_normal, tris))
+    N, S, F = y.shape[0], y.shape[1], T.shape[0]
+    w = y - p[:, None]                                                    # (N, S, 3) towards the samples
+    r2 = (w * w).sum(-1)
+    u = w / r2.sqrt()[..., None]
+    n = n / n.norm(dim=1, keepdim=True)
+    nl = nl / nl.norm()
+    cos_p, cos_l = (u * n[:, None]).sum(-1), -(u @ nl)
+    if clamp:
+        cos_p, cos_l = cos_p.clamp_min(0), cos_l.clamp_min(0)
+    weight = cos_p * (cos_l if cos_light else 1.0) / (r2 if inv_r2 else 1.0)
+    if shadows:
+        o = p.repeat_interleave(S, 0).repeat_interleave(F, 0)
+        d = w.reshape(-1, 3).repeat_interleave(F, 0)
+        t, _, hit = _ref("course.intersect", "intersect_triangles")(o, d, T.repeat(N * S, 1, 1))
+        blocked = (hit & (t > EPS) & (t < 1 - EPS)).view(N, S, F).any(-1)
+        weight = weight * (~blocked)
+    return weight.sum(1) * (float(area) / S if scale else 1.0 / S)
+
+
+def _area_scene(seed, n=24, grid=3, facing_away=False):
+    """Points on the ground and on a tilted wall, a 0.8 x 0.5 light at height 2 facing down (stratified samples),
+    a square occluder at height 1; some points see the light from behind it or lie above its plane."""
+    g = generator(seed)
+    r = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)     # noqa: E731
+    p = r(n, 3) * torch.tensor([3.0, 0.0, 3.0], dtype=torch.float64) - torch.tensor([1.5, 0, 1.5], dtype=torch.float64)
+    nrm = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64).expand(n, 3).clone()
+    k = n // 4
+    nrm[:k] = torch.nn.functional.normalize(r(k, 3) * 2 - 1, dim=1)       # tilted: some face away from the light
+    if facing_away:
+        p[k:2 * k, 1] = 2.5                                               # above the light: behind its surface
+    corner = torch.tensor([-0.4, 2.0, -0.25], dtype=torch.float64)
+    e1, e2 = torch.tensor([0.8, 0.0, 0.0], dtype=torch.float64), torch.tensor([0.0, 0.0, 0.5], dtype=torch.float64)
+    cells = torch.arange(grid, dtype=torch.float64)
+    i, j = torch.meshgrid(cells, cells, indexing="ij")
+    uv = (torch.stack([i.reshape(-1), j.reshape(-1)], 1) + r(n, grid * grid, 2)) / grid
+    samples = corner + uv[..., :1] * e1 + uv[..., 1:] * e2                # (N, S, 3)
+    tris = torch.tensor([[[-0.5, 1.0, -0.5], [-0.5, 1.0, 0.5], [0.5, 1.0, 0.5]],
+                         [[-0.5, 1.0, -0.5], [0.5, 1.0, 0.5], [0.5, 1.0, -0.5]]], dtype=torch.float64)
+    return p, nrm, samples, torch.tensor([0.0, -1.0, 0.0], dtype=torch.float64), 0.4, tris
+
+
+def _area_problem(impl, scene, label) -> str | None:
+    name = f"area_light({label})"
+    expected = _area_reference(*scene)
+    got = to_tensor(_call(impl, *scene), name)
+    if got.shape != expected.shape:
+        return f"{name}: shape {tuple(expected.shape)} expected, got {tuple(got.shape)}"
+    if compare(got, expected, name=name, check_dtype=False) is None:
+        return None
+    variants = [
+        (dict(cos_light=False), "the light's cosine is missing: a sample weighs cos θ cos θ′ / r², θ′ between "
+                                "the light's normal and the direction back to the point"),
+        (dict(inv_r2=False), "the 1 / r² is missing (or the cosines are taken with the direction to the sample "
+                             "before dividing it by its length r, which cancels it): a sample's solid angle falls "
+                             "with the square of its distance, and cos θ, cos θ′ are dot products of unit vectors"),
+        (dict(scale=False), "the light's area is missing: the estimate of the integral over the light is "
+                            "A / S times the sum of the samples' weights (A = area)"),
+        (dict(clamp=False), "negative cosines count: a point behind which the light lies (cos θ < 0), or a sample "
+                            "seen from behind the light (cos θ′ < 0), receives nothing: clamp each cosine at 0"),
+        (dict(shadows=False), "nothing is shadowed: a sample counts only when the segment from the point to it is "
+                              "free (a hit at 1e-6 < t < 1 - 1e-6 blocks it)"),
+    ]
+    for switch, explanation in variants:
+        alternative = _area_reference(*scene, **switch)
+        if _close(got, alternative, 1e-7) and not _close(expected, alternative, 1e-7):
+            return f"{name}: {explanation}"
+    return compare(got, expected, name=name, check_dtype=False)
+
+
+@task("7.5", "area_light", points=4)
+def _check_area_light(impl):
+    forbidden = forbidden_call(impl, "area_light", [("course.raytrace", "visible"), ("course.bvh", "BVH"),
+                                                    ("course.intersect", "intersect_triangles"),
+                                                    ("course.intersect", "moller_trumbore")])
+    if forbidden:
+        return 0, forbidden
+
+    def ground():
+        scene = list(_area_scene(85))
+        scene[1] = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64).expand(24, 3).clone()
+        require(_area_problem(impl, tuple(scene), "points on the ground under a light and an occluder"))
+
+    def tilted():
+        require(_area_problem(impl, _area_scene(86), "tilted points, some facing away from the light"))
+
+    def behind():
+        require(_area_problem(impl, _area_scene(87, facing_away=True), "points above the light's plane"))
+        scene = list(_area_scene(88, n=16, grid=4))
+        scene[1] = scene[1] * 3.0                                         # normals that are not unit length
+        scene[3] = scene[3] * 2.0
+        require(_area_problem(impl, tuple(scene), "normals of any length"))
+    return grade_parts((2, "points on the ground, a light, an occluder", ground),
+                       (1, "tilted points, some facing away from the light", tilted),
+                       (1, "points behind the light's plane, normals of any length", behind))
+
+
+# ------------------------------------------------------------------------ 7.6 the error against samples
+
+def _slope_reference(estimate, exact, counts, seeds):
+    """RMSE (K,) pooled over seeds and points for each count, and the least-squares slope of log RMSE on log S."""
+    exact = exact.to(torch.float64)
+    rmse = torch.stack([torch.stack([((to_tensor(estimate(int(S), int(s))).to(torch.float64) - exact) ** 2)
+                                     for s in seeds]).mean().sqrt() for S in counts])
+    x, y = torch.log(torch.tensor(counts, dtype=torch.float64)), rmse.log()
+    slope = ((x - x.mean()) * (y - y.mean())).sum() / ((x - x.mean()) ** 2).sum()
+    return rmse, float(slope)
+
+
+def _occluded_light(n_points, seed, stratified=True, size=0.6):
+    """(estimate, exact): the visible fraction of a unit-square light at height 2 over points on the ground,
+    partly hidden by a square occluder of side ``size`` at height 1 (parallel to it). Exact: the occluder,
+    projected from the point onto the light's plane, is a square; the light minus their overlap is visible.
+    The estimate draws S samples (stratified on a grid when S is a square, else independent) per point."""
+    g = generator(seed)
+    p = torch.rand(n_points, 2, generator=g, dtype=torch.float64) * 1.6 - 0.8   # (x, z) on the ground
+    lo_occ, hi_occ = torch.tensor(-size / 2), torch.tensor(size / 2)
+    scale = 2.0                                                           # height 1 → 2 doubles offsets from p
+    lo_p, hi_p = p + (lo_occ - p) * scale, p + (hi_occ - p) * scale      # (N, 2) its shadow on the light
+    overlap = (torch.minimum(hi_p, torch.tensor(0.5)) - torch.maximum(lo_p, torch.tensor(-0.5))).clamp_min(0)
+    exact = 1 - overlap.prod(1)
+
+    def estimate(S, s):
+        gs = generator(1000 * seed + 7 * S + s)
+        grid = math.isqrt(S)
+        if stratified and grid * grid == S:
+            cells = torch.arange(grid, dtype=torch.float64)
+            i, j = torch.meshgrid(cells, cells, indexing="ij")
+            uv = (torch.stack([i.reshape(-1), j.reshape(-1)], 1) + torch.rand(n_points, S, 2, generator=gs,
+                                                                              dtype=torch.float64)) / grid
+        else:
+            uv = torch.rand(n_points, S, 2, generator=gs, dtype=torch.float64)
+        y = uv - 0.5                                                      # (N, S, 2) on the light
+        q = (p[:, None] + y) / 2                                          # where the segment crosses height 1
+        blocked = ((q >= lo_occ) & (q <= hi_occ)).all(-1)
+        return (~blocked).to(torch.float64).mean(1)
+    return estimate, exact
+
+
+def _slope_problem(impl, estimate, exact, counts, seeds, label) -> str | None:
+    name = f"error_slope({label})"
+    rmse_exp, slope_exp = _slope_reference(estimate, exact, counts, seeds)
+    out = _call(impl, estimate, exact, list(counts), list(seeds))
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        return f"{name}: return a tuple (rmse, slope), got {type(out).__name__}"
+    rmse, slope = to_tensor(out[0], f"{name} rmse"), out[1]
+    try:
+        slope = torch.as_tensor(slope, dtype=torch.float64).detach()
+    except (TypeError, ValueError, RuntimeError):
+        return f"{name} slope: a number expected, got {type(out[1]).__name__}"
+    if rmse.shape != rmse_exp.shape:
+        return f"{name} rmse: shape {tuple(rmse_exp.shape)} expected (one per sample count), got {tuple(rmse.shape)}"
+    if not _close(rmse, rmse_exp, 1e-9):
+        per_seed = torch.stack([torch.stack([((estimate(S, s) - exact) ** 2).mean().sqrt() for s in seeds]).mean()
+                                for S in counts])
+        mae = torch.stack([torch.stack([(estimate(S, s) - exact).abs() for s in seeds]).mean() for S in counts])
+        if _close(rmse, rmse_exp ** 2, 1e-9):
+            return f"{name} rmse: that is the mean squared error: take its square root (RMSE)"
+        if _close(rmse, mae, 1e-9):
+            return f"{name} rmse: that is the mean absolute error: the task asks for the root of the mean square"
+        if _close(rmse, per_seed, 1e-9):
+            return (f"{name} rmse: the RMSE of each seed, averaged: pool the squared errors of every seed and point "
+                    "first, then take one square root per sample count")
+        return compare(rmse, rmse_exp, name=f"{name} rmse", check_dtype=False)
+    if slope.numel() != 1:
+        return f"{name} slope: one number expected, got shape {tuple(slope.shape)}"
+    got = float(slope.reshape(-1)[0])
+    if abs(got - slope_exp) <= 1e-9 * max(1.0, abs(slope_exp)):
+        return None
+    x, y = torch.log(torch.tensor(counts, dtype=torch.float64)), rmse_exp.log()
+    ends = float((y[-1] - y[0]) / (x[-1] - x[0]))
+    if abs(got + slope_exp) <= 1e-9 * max(1.0, abs(slope_exp)):
+        return f"{name} slope: the sign is flipped: the error falls, so the slope of log RMSE against log S is negative"
+    if abs(got - ends) <= 1e-9 * max(1.0, abs(ends)):
+        return (f"{name} slope: that is the slope between the first and last points: fit a straight line to all "
+                "the points (least squares)")
+    if abs(got - 2 * slope_exp) <= 1e-9 * max(1.0, abs(slope_exp)):
+        return f"{name} slope: twice the expected slope: fit log RMSE, not log of the squared error"
+    return f"{name} slope: got {got:.6g}, expected {slope_exp:.6g} (least squares of log RMSE on log S)"
+
+
+@task("7.6", "error_slope", points=3)
+def _check_error_slope(impl):
+    def stratified():
+        estimate, exact = _occluded_light(48, 90)
+        require(_slope_problem(impl, estimate, exact, (4, 16, 64, 256), (0, 1, 2), "stratified samples"))
+
+    def independent():
+        estimate, exact = _occluded_light(48, 91, stratified=False)
+        require(_slope_problem(impl, estimate, exact, (4, 16, 64, 256), (0, 1, 2), "independent samples"))
+
+    def other():
+        estimate, exact = _occluded_light(32, 92, size=0.9)
+        require(_slope_problem(impl, estimate, exact, (9, 25, 100, 400, 900), (3, 5), "a larger occluder, 2 seeds"))
+    return grade_parts((1, "stratified samples", stratified),
+                       (1, "independent samples (another slope)", independent),
+                       (1, "other counts, seeds and occluder", other))

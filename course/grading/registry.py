@@ -284,7 +284,7 @@ def format_result(result: Result) -> str:
 
 def _diagnoses(message: str) -> list[str]:
     """A message split where ``grade_parts`` joined its diagnoses: at "; " followed by a case's label, which
-    names the student's function with its arguments ("soft_silhouette(faint coverage ...): ...")."""
+    names the student's function with its arguments ("soft_blend(tiny gamma ...): ...")."""
     parts = [message]
     for name in {t.name for t in TASKS.values()}:
         parts = [piece for part in parts for piece in _split_before(part, "; " + name + "(")]
@@ -299,7 +299,7 @@ def _split_before(text: str, marker: str) -> list[str]:
 def _explain_undefined_task_functions() -> None:
     """In IPython, a NameError for a task's function (a check cell run before the cell that defines the
     function, or after a kernel restart) is shown as what to do: "run the cell that defines
-    `central_difference` (task 9.1) first". Other exceptions are shown as IPython shows them. Installed when
+    `boundary_term` (task 9.2) first". Other exceptions are shown as IPython shows them. Installed when
     ``course.grading`` is imported (an exercise notebook's first cell); does nothing outside IPython."""
     try:
         from IPython import get_ipython
