@@ -166,3 +166,80 @@ def test_bad_inputs(torus, kwargs, match):
 def test_bad_target():
     with pytest.raises(ValueError, match="target_mesh"):
         fit_with_learned_views(models.torus().verts, steps=1, size=16, progress=False)
+
+
+# ------------------------------------------------------------------ view_objective="task": MVTN's scheme
+
+def test_surface_points_lie_on_the_surface_uniformly_by_area():
+    from course.fit_views import surface_points
+    from course.mesh import Mesh
+    # two triangles of area 1 and 3 in the plane z = 0: a quarter of the points in the first
+    verts = torch.tensor([[0, 0, 0], [1, 0, 0], [0, 2, 0], [2, 0, 0], [5, 0, 0], [2, 2, 0]], dtype=torch.float64)
+    mesh = Mesh(verts, torch.tensor([[0, 1, 2], [3, 4, 5]]))
+    p = surface_points(mesh, 4000, seed=1)
+    assert p.shape == (4000, 3) and (p[:, 2] == 0).all()
+    first = (p[:, 0] <= 1 + 1e-12) & (2 * p[:, 0] + p[:, 1] <= 2 + 1e-12)
+    assert abs(float(first.double().mean()) - 0.25) < 0.03
+    assert torch.equal(p, surface_points(mesh, 4000, seed=1))                    # seeded
+    with pytest.raises(ValueError, match="n"):
+        surface_points(mesh, 0)
+
+
+def test_chamfer_distance_is_zero_on_itself_and_symmetric():
+    from course.fit_views import chamfer_distance
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(50, 3, generator=g, dtype=torch.float64), torch.rand(70, 3, generator=g, dtype=torch.float64)
+    assert float(chamfer_distance(a, a)) < 1e-15                                # cdist's rounding
+    assert float(chamfer_distance(a, b)) == pytest.approx(float(chamfer_distance(b, a)))
+    grid = torch.cartesian_prod(*[torch.arange(3, dtype=torch.float64)] * 3)    # points 1 apart: a shift of 0.1
+    moved = grid + torch.tensor([0.1, 0.0, 0.0], dtype=torch.float64)          # has each point's twin nearest
+    assert float(chamfer_distance(grid, moved)) == pytest.approx(0.02)
+
+
+@pytest.fixture
+def float64_default():
+    before = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)
+    yield
+    torch.set_default_dtype(before)
+
+
+def test_task_view_gradient_matches_finite_differences_of_the_look_ahead(float64_default):
+    """dT/dφ with T the chamfer distance of the shape after one silhouette step: the finite difference of two
+    first derivatives against central differences of T itself (float64)."""
+    torus = models.torus(0.8, 0.3, 24, 12)
+    from course.fit import start_verts
+    from course.fit_views import _silhouettes, _task_view_gradient, chamfer_distance, surface_points
+    from course.mesh import Mesh
+    base, faces = start_verts(models.icosphere(1, 0.5), 0)
+    verts = base + 0.03 * torch.randn(base.shape, generator=torch.Generator().manual_seed(3), dtype=base.dtype)
+    points, lr, sigma = surface_points(torus, 500, 0), 0.05, 3e-4
+    cam = lambda a: [view_camera(az, el, size=16) for az, el in a]
+
+    def d_loss(angles):
+        v = verts.clone().requires_grad_(True)
+        cams = cam(angles)
+        loss = losses.silhouette_iou_loss(_silhouettes(Mesh(v, faces), cams, sigma), _silhouettes(torus, cams, sigma),
+                                          reduction="mean")
+        return torch.autograd.grad(loss, v)[0]
+
+    a = ring_angles(3)
+    got = _task_view_gradient(torus, faces, verts, d_loss(a), a.clone().requires_grad_(True), cam, sigma, lr, points)
+    fd, h = torch.zeros_like(a), 1e-5
+    for i in range(3):
+        for j in range(2):
+            e = torch.zeros_like(a)
+            e[i, j] = h
+            fd[i, j] = (chamfer_distance(verts - lr * d_loss(a + e), points)
+                        - chamfer_distance(verts - lr * d_loss(a - e), points)) / (2 * h)
+    assert float(fd.norm()) > 0
+    assert float((got - fd).norm() / fd.norm()) < 5e-3
+
+
+def test_task_views_move_and_the_fit_improves(torus):
+    run = _fit(torus, True, view_objective="task", task_points=300, steps=8, view_every=2)
+    start, end = _angles(run.history, 0), _angles(run.history, -1)
+    assert (start - end).abs().max() > 0.1                                     # the views moved (degrees)
+    assert run.history.metrics["iou_loss"][-1] < run.history.metrics["iou_loss"][0]
+    with pytest.raises(ValueError, match="task_points"):
+        fit_with_learned_views(torus, view_objective="task", task_points=0, steps=1, size=16, progress=False)

@@ -1,20 +1,20 @@
 """Lecture 10's graded tasks (course/grading/lecture10.py): the references agree with the package
-(course.losses.silhouette_iou_loss and smoothness_loss, torch.optim.SGD), they score full marks, a solution
-written as a student would scores full marks without calling them, typical mistakes lose points with the
-diagnosis a student can act on, and calling the package (or torch.optim) scores 0."""
+(course.losses.silhouette_iou_loss and smoothness_loss), they score full marks, a solution written as a student
+would scores full marks without calling them, typical mistakes lose points with the diagnosis a student can act
+on, and calling the package (or the grader's references) scores 0."""
 import pytest
 import torch
 
 from course import losses, models
 from course.grading import lecture10, run_check, tasks_for_lecture
-from course.grading.lecture10 import (gradient_step_reference, silhouette_iou_loss_reference,
-                                      smoothness_loss_reference)
+from course.grading.lecture10 import silhouette_iou_loss_reference, smoothness_loss_reference
 from grading_contract import contract
 
 # the public references are forbidden to students; these call the same code under its private names
 REFERENCES = {"10.1": lambda pred, target: lecture10._iou_loss(pred, target),
               "10.2": lambda verts, faces: lecture10._smoothness(verts, faces),
-              "10.3": lambda params, loss_fn, lr: lecture10._step(params, loss_fn, lr)}
+              "10.3": lambda render, target, pose0, steps: lecture10._fit(render, target, pose0, steps),
+              "10.4": lambda loss_fn, start, stop, n: lecture10._staircase(loss_fn, start, stop, n)}
 
 
 # ------------------------------------------------------------------------------ solutions, as students write
@@ -62,42 +62,66 @@ def smoothness_loss(verts, faces):
     return smooth(verts, faces)
 
 
-def step(params, loss_fn, lr, zero=True, sign=-1.0, no_grad=True, rebind=False, after=False, keep_graph=False):
-    if zero:
-        for p in params:
-            if p.grad is not None:
-                p.grad.zero_()
-    loss = loss_fn()
-    loss.backward()
-    if rebind:
-        for k, p in enumerate(params):
-            params[k] = p + sign * lr * p.grad
-        return loss.detach()
-    if no_grad:
-        with torch.no_grad():
-            for p in params:
-                p += sign * lr * p.grad
-    else:
-        for p in params:
-            p += sign * lr * p.grad
-    if after:
-        return loss_fn().detach()
-    return loss if keep_graph else loss.item()
+def fit(render, target, pose0, steps, lr=0.05, zero=True, sign=1.0, renders=1, copy=True, move=True):
+    """A student's loop: Adam at a constant learning rate on the mean squared difference."""
+    pose = (pose0.detach().clone() if copy else pose0).requires_grad_(True)
+    opt = torch.optim.Adam([pose], lr=lr)
+    for _ in range(steps):
+        if zero:
+            opt.zero_grad()
+        for _ in range(renders):
+            image = render(pose)
+        loss = sign * ((image - target) ** 2).mean()
+        loss.backward()
+        if move:
+            opt.step()
+    return pose.detach().clone()
 
 
-def gradient_step(params, loss_fn, lr):
-    return step(params, loss_fn, lr)
+def fit_pose(render, target, pose0, steps):
+    return fit(render, target, pose0, steps)
 
 
-SOLUTIONS = {"10.1": silhouette_iou_loss, "10.2": smoothness_loss, "10.3": gradient_step}
+def in_place(render, target, pose0, steps):
+    """Optimises pose0 itself."""
+    pose0.requires_grad_(True)
+    opt = torch.optim.Adam([pose0], lr=0.05)
+    for _ in range(steps):
+        opt.zero_grad()
+        ((render(pose0) - target) ** 2).mean().backward()
+        opt.step()
+    pose0.requires_grad_(False)
+    return pose0.detach().clone()
+
+
+def stairs(loss_fn, start, stop, n, runs_in_samples=False, in_units=True):
+    xs = [start + (stop - start) * k / (n - 1) for k in range(n)]
+    values = [float(loss_fn(torch.tensor(x, dtype=torch.float64))) for x in xs]
+    jumps, longest, run = 0, 0, 0
+    for a, b in zip(values, values[1:]):
+        if a != b:
+            jumps, run = jumps + 1, 0
+        else:
+            run += 1
+            longest = max(longest, run)
+    if runs_in_samples and longest:
+        longest += 1
+    return jumps, longest * (stop - start) / (n - 1) if in_units else longest
+
+
+def staircase(loss_fn, start, stop, n):
+    return stairs(loss_fn, start, stop, n)
+
+
+SOLUTIONS = {"10.1": silhouette_iou_loss, "10.2": smoothness_loss, "10.3": fit_pose, "10.4": staircase}
 
 MISTAKES = [
     ("10.1", lambda p, t: iou_loss(p, t, union_overlap=False), 0, ["counts the overlap twice"]),
     ("10.1", lambda p, t: iou_loss(p, t, one=False), 0, ["the IoU itself"]),
     ("10.1", lambda p, t: -iou_loss(p, t, one=False), 0, ["negative IoU"]),
-    ("10.1", lambda p, t: iou_loss(p, t, pooled=True), 1, ["pooled"]),
-    ("10.1", lambda p, t: iou_loss(p, t, mean=True), 1, ["mean over the views"]),
-    ("10.1", lambda p, t: iou_loss(p, t, guard=False), 2, ["NaN", "perfect match"]),
+    ("10.1", lambda p, t: iou_loss(p, t, pooled=True), 0, ["pooled"]),
+    ("10.1", lambda p, t: iou_loss(p, t, mean=True), 0, ["mean over the views"]),
+    ("10.1", lambda p, t: iou_loss(p, t, guard=False), 1, ["NaN", "perfect match"]),
     ("10.1", lambda p, t: iou_loss((p > 0.5).to(p.dtype), t), 0, ["thresholded"]),
     ("10.1", lambda p, t: iou_loss(p.detach(), t), 0, ["no gradient reaches pred"]),
     ("10.2", lambda v, f: smooth(v, f, sign=1.0), 0, ["sign is flipped"]),
@@ -107,12 +131,15 @@ MISTAKES = [
     ("10.2", lambda v, f: lecture10._smoothness(v, f, pairs="consecutive"), 1, ["boundary edges"]),
     ("10.2", lambda v, f: lecture10._smoothness(v, f, reduce="mean"), 0, ["the mean over the edges"]),
     ("10.2", lambda v, f: smooth_nan(v, f), 2, ["zero-area face"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, sign=1.0), 0, ["uphill"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, zero=False), 1, ["not cleared"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, no_grad=False), 0, ["torch.no_grad()"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, rebind=True), 0, ["replaced by a new tensor"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, after=True), 0, ["after the step"]),
-    ("10.3", lambda ps, fn, lr: step(ps, fn, lr, keep_graph=True), 0, ["still holds the graph"]),
+    ("10.3", lambda *a: fit(*a, sign=-1.0), 0, ["uphill", "against the gradient"]),
+    ("10.3", lambda *a: fit(*a, zero=False), 0, ["down and up again", "clear them"]),
+    ("10.3", lambda *a: fit(*a, lr=0.005), 0, ["not converged", "larger steps"]),
+    ("10.3", lambda *a: fit(*a, move=False), 0, ["did not move"]),
+    ("10.3", lambda *a: fit(*a, renders=2), 0, ["budget"]),
+    ("10.3", in_place, 0, ["changed in place"]),
+    ("10.4", lambda *a: stairs(*a, runs_in_samples=True), 1, ["spans k intervals"]),
+    ("10.4", lambda *a: stairs(*a, in_units=False), 1, ["units"]),
+    ("10.4", lambda *a: lecture10._staircase(*a, inclusive=False), 0, ["both ends included"]),
 ]
 
 
@@ -125,9 +152,10 @@ def smooth_nan(verts, faces):
     return ((1 - (n[pairs[:, 0]] * n[pairs[:, 1]]).sum(-1)) ** 2).sum()
 
 
-def test_lecture_10_has_three_tasks_of_three_points_each():
+def test_lecture_10_has_four_tasks_with_points_by_difficulty():
     assert [(t.id, t.name, t.points) for t in tasks_for_lecture(10)] == [
-        ("10.1", "silhouette_iou_loss", 3), ("10.2", "smoothness_loss", 3), ("10.3", "gradient_step", 3)]
+        ("10.1", "silhouette_iou_loss", 2), ("10.2", "smoothness_loss", 3), ("10.3", "fit_pose", 5),
+        ("10.4", "staircase", 2)]
     assert {task for task, *_ in MISTAKES} == set(REFERENCES)
 
 
@@ -191,20 +219,20 @@ def test_the_grids_seam_and_the_degenerate_face_change_the_loss():
     assert sorted(sorted(p) for p in pairs if 2 in p) == [[0, 2], [1, 2], [2, 3]]
 
 
-def test_the_step_reference_is_torch_optim_sgd():
-    f, starts = lecture10._layer(9)
-    mine = [s.clone().requires_grad_(True) for s in starts]
-    theirs = [s.clone().requires_grad_(True) for s in starts]
-    sgd = torch.optim.SGD(theirs, lr=0.1)
-    for _ in range(5):
-        loss = gradient_step_reference(mine, lambda: f(*mine), 0.1)
-        sgd.zero_grad()
-        want = f(*theirs)
-        want.backward()
-        sgd.step()
-        assert float(loss) == pytest.approx(float(want.detach()), rel=1e-12)
-    for p, q in zip(mine, theirs):
-        assert p.is_leaf and torch.allclose(p, q, atol=1e-14, rtol=0)
+def test_the_fit_reference_converges_well_inside_the_tolerance_on_every_problem():
+    for seed, n, dtype, steps in ((131, 2, torch.float64, 150), (132, 2, torch.float64, 150),
+                                  (133, 3, torch.float64, 150), (134, 3, torch.float64, 150),
+                                  (135, 3, torch.float64, 100), (136, 2, torch.float32, 150)):
+        problem = lecture10._PoseProblem(seed, n, dtype, steps)
+        angle, shift = problem.errors(lecture10._fit(problem.render, problem.target, problem.start, steps))
+        assert shift < lecture10._SHIFT_TOL / 5 and (angle is None or angle < lecture10._ANGLE_TOL / 5)
+        assert problem.calls == steps
+
+
+def test_the_staircase_of_the_hard_loss_is_a_staircase_and_the_soft_loss_has_none():
+    jumps, flat = lecture10._staircase(lecture10._Landscape((1.0, 0.0)), 0.0, 2.0, 201)
+    assert 0 < jumps < 200 and flat > 0.02
+    assert lecture10._staircase(lecture10._Landscape((1.0, 0.0), hard=False), 0.0, 1.0, 51) == (50, 0.0)
 
 
 CALLING_THE_PACKAGE = {
@@ -219,20 +247,14 @@ def test_calling_the_package_scores_zero(task_id):
     assert result.points == 0 and "calls course.losses" in result.message, result.message
 
 
-def step_with_sgd(params, loss_fn, lr):
-    opt = torch.optim.SGD(params, lr=lr)
-    opt.zero_grad()
-    loss = loss_fn()
-    loss.backward()
-    opt.step()
-    return loss.detach()
+def fit_via_grading(render, target, pose0, steps):
+    from course.grading import lecture10
+    return lecture10.fit_pose_reference(render, target, pose0, steps)
 
 
-def test_an_optimiser_from_torch_scores_zero():
-    result = run_check("10.3", step_with_sgd)
-    assert result.points == 0 and "torch.optim" in result.message, result.message
-    result = run_check("10.3", torch.optim.SGD)                           # the reference itself, passed as is
-    assert result.points == 0 and result.message.startswith("gradient_step calls torch.optim.sgd.SGD"), result.message
+def test_calling_the_fit_reference_scores_zero():
+    result = run_check("10.3", fit_via_grading)
+    assert result.points == 0 and "fit_pose_reference" in result.message, result.message
 
 
 def smoothness_via_grading(verts, faces):

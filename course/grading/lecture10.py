@@ -1,42 +1,45 @@
 """The checks of lecture 10's graded tasks (inverse rendering): 10.1 silhouette_iou_loss, 10.2 smoothness_loss,
-10.3 gradient_step.
+10.3 fit_pose, 10.4 staircase.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
 module, which registers its checks in ``course.grading.TASKS``.
 
-The three tasks are the pieces of every fit in lecture 10 (Kato, Ushiku and Harada, CVPR 2018):
+The tasks are the pieces of every fit in lecture 10 (Kato, Ushiku and Harada, CVPR 2018), and one measurement:
 
 * 10.1, the silhouette loss: per view, ``1 - |ŝ ⊙ s|₁ / |ŝ + s - ŝ ⊙ s|₁`` (one minus the soft IoU of the
   rendered silhouette ŝ and the target s), summed over the views; a view whose union is empty is a perfect
   match and scores 0 (never 0 / 0).
 * 10.2, the smoothness loss: ``Σ (1 - n₁·n₂)²`` over the interior edges (shared by exactly two faces, found by
   vertex index), n₁, n₂ the unit normals of the edge's two faces (a zero-area face has the normal 0).
-* 10.3, one step of gradient descent: clear the parameters' old gradients, evaluate the loss, backpropagate,
-  and move every parameter by ``-lr × its gradient`` in place, outside the autograd graph; return the loss
-  of the parameters before the step.
+* 10.3, a fitting loop that must converge: from a start pose, minimise the mean squared difference between a
+  given differentiable render and a target within a step budget (one render per step); graded by the error
+  the returned pose has on the grader's own problems (a soft 2D triangle shifted, or turned and shifted: radians
+  beside pixels), so the loop must pick its optimiser and step sizes well.
+* 10.4, an analysis: sample a loss of one parameter on a fine grid and measure its staircase, the number of
+  intervals where it jumps and the widest flat run; graded on the grader's hard and soft losses.
 
 The references are written here from these formulas, in float64; ``tests/test_grading_10.py`` checks that
-they agree with ``course.losses.silhouette_iou_loss`` and ``course.losses.smoothness_loss`` (and the step with
-``torch.optim.SGD``). They are public so that those tests (and a curious student) can read them; a graded
+they agree with ``course.losses.silhouette_iou_loss`` and ``course.losses.smoothness_loss``. They are public so that those tests (and a curious student) can read them; a graded
 function that calls them, or the package functions doing the task's work, scores 0.
 """
 from __future__ import annotations
 
-import types
+import math
 
 import torch
 
-from .helpers import _close, compare, generator, grade_parts, require, summarize_exception, to_tensor
-from .registry import _code_names, forbidden_call, task
+from .helpers import _close, compare, generator, grade_parts, require, to_tensor
+from .registry import forbidden_call, task
 
-__all__ = ["silhouette_iou_loss_reference", "smoothness_loss_reference", "gradient_step_reference"]
+__all__ = ["silhouette_iou_loss_reference", "smoothness_loss_reference", "fit_pose_reference", "staircase_reference"]
 
 FORBIDDEN = [("course.losses", "silhouette_iou_loss"), ("course.losses", "smoothness_loss"),
              ("course.losses", "interior_edges"), ("course.fit", "fit_silhouettes"),
              ("course.grading.lecture10", "silhouette_iou_loss_reference"),
              ("course.grading.lecture10", "smoothness_loss_reference"),
-             ("course.grading.lecture10", "gradient_step_reference")]
+             ("course.grading.lecture10", "fit_pose_reference"), ("course.fit", "fit_camera"),
+             ("course.grading.lecture10", "staircase_reference")]
 
 
 # ------------------------------------------------------------------------------------- the references
@@ -51,12 +54,6 @@ def smoothness_loss_reference(verts, faces) -> torch.Tensor:
     """10.2: ``Σ (1 - n₁·n₂)²`` over the interior edges of the mesh, a scalar in verts' dtype; verts (V, 3),
     faces (F, 3) int64. Differentiable in verts."""
     return _smoothness(verts, faces)
-
-
-def gradient_step_reference(params, loss_fn, lr):
-    """10.3: one step of gradient descent on the leaf tensors ``params`` (a list), in place; returns the loss
-    (a detached scalar tensor) before the step."""
-    return _step(params, loss_fn, lr)
 
 
 # ----------------------------------------------------------------------------- 10.1 the silhouette loss
@@ -162,7 +159,7 @@ def _match(got, variants, tol=1e-6):
     return None
 
 
-@task("10.1", "silhouette_iou_loss", points=3, reference=("course.losses", "silhouette_iou_loss"))
+@task("10.1", "silhouette_iou_loss", points=2, reference=("course.losses", "silhouette_iou_loss"))
 def _check_silhouette_iou_loss(impl):
     forbidden = forbidden_call(impl, "silhouette_iou_loss", FORBIDDEN)
     if forbidden:
@@ -188,8 +185,10 @@ def _check_silhouette_iou_loss(impl):
         require(_iou_problem(impl, pred[0], target[0], "one view, both silhouettes empty, float64"))
         pred, target = _blobs(2, 12, 107, dtype=torch.float32)
         require(_iou_problem(impl, pred, target, "2 views, float32"))
-    return grade_parts((1, "one view", one_view),
-                       (1, "several views", views),
+    def views_and_one():
+        one_view()
+        views()
+    return grade_parts((1, "one view and several views", views_and_one),
                        (1, "empty views, float32", stress))
 
 
@@ -385,152 +384,248 @@ def _check_smoothness_loss(impl):
                        (1, "a zero-area face, float32, no interior edge", stress))
 
 
-# ------------------------------------------------------------------------------ 10.3 one gradient step
+# ------------------------------------------------------------------------------- 10.3 a fitting loop
 
-def _step(params, loss_fn, lr, *, zero=True, sign=-1.0):
-    """10.3 and its typical mistakes: ``zero`` (clear old gradients first), ``sign`` (-1: descend)."""
-    if zero:
-        for p in params:
-            p.grad = None
-    loss = loss_fn()
-    loss.backward()
-    with torch.no_grad():
-        for p in params:
-            if p.grad is not None:
-                p.add_(p.grad, alpha=sign * lr)
-    return loss.detach()
+_TRIANGLE = torch.tensor([[6.0, 5.0], [19.0, 9.0], [9.0, 19.0]], dtype=torch.float64)   # pixels, asymmetric
 
 
-def _uses_torch_optim(impl) -> bool:
-    """True when the student's code names ``optim`` (``torch.optim.SGD`` ...): an optimiser does the task."""
-    code = getattr(impl, "__code__", None)
-    if not isinstance(code, types.CodeType):
-        return False
-    names = _code_names(code)
-    return bool(names & {"optim", "SGD", "Adam", "Optimizer"})
+def _posed(verts, pose):
+    """verts (3, 2) moved by pose: (2,) a shift in pixels, or (3,) a turn (radians, about the centroid) then a
+    shift."""
+    if pose.shape[0] == 2:
+        return verts + pose
+    c = verts.mean(0)
+    cos, sin = torch.cos(pose[0]), torch.sin(pose[0])
+    rot = torch.stack([torch.stack([cos, -sin]), torch.stack([sin, cos])])
+    return c + (verts - c) @ rot.T + pose[1:]
 
 
-def _quadratic(seed, n=3, dtype=torch.float64):
-    """A least-squares loss ``|A x - b|²`` of a parameter x (n,), and the start x0."""
-    g = generator(seed)
-    A = torch.randn(n + 2, n, generator=g, dtype=torch.float64).to(dtype)
-    b = torch.randn(n + 2, generator=g, dtype=torch.float64).to(dtype)
-    x0 = torch.randn(n, generator=g, dtype=torch.float64).to(dtype)
-    return (lambda x: ((A @ x - b) ** 2).sum()), x0
+def _triangle_image(pose, size=24, width=0.7, hard=False):
+    """(size, size) coverage of the posed triangle at the pixel centres: soft (a product of sigmoids of the signed
+    distances to the three edges, ``width`` pixels wide) or hard (the centre inside or not)."""
+    v = _posed(_TRIANGLE.to(pose.dtype), pose)
+    y, x = torch.meshgrid(torch.arange(size, dtype=pose.dtype) + 0.5, torch.arange(size, dtype=pose.dtype) + 0.5,
+                          indexing="ij")
+    e0, e1 = v[1] - v[0], v[2] - v[0]
+    orientation = torch.sign(e0[0] * e1[1] - e0[1] * e1[0])
+    cover = torch.ones(size, size, dtype=pose.dtype)
+    for k in range(3):
+        a, e = v[k], v[(k + 1) % 3] - v[k]
+        d = orientation * (e[0] * (y - a[1]) - e[1] * (x - a[0])) / e.norm()   # > 0 inside
+        cover = cover * ((d > 0).to(pose.dtype) if hard else torch.sigmoid(d / width))
+    return cover
 
 
-def _layer(seed, dtype=torch.float64):
-    """A tiny model with two parameters, W (2, 3) and c (2,): the loss ``Σ (tanh(W u + c) - y)²``."""
-    g = generator(seed)
-    u = torch.randn(5, 3, generator=g, dtype=torch.float64).to(dtype)
-    y = torch.rand(5, 2, generator=g, dtype=torch.float64).to(dtype)
-    W0 = torch.randn(2, 3, generator=g, dtype=torch.float64).to(dtype)
-    c0 = torch.randn(2, generator=g, dtype=torch.float64).to(dtype)
-    return (lambda W, c: ((torch.tanh(u @ W.T + c) - y) ** 2).sum()), [W0, c0]
+class _PoseProblem:
+    """One fit the grader asks for: a render function that counts its calls and records the poses it sees, the
+    target (the render at the true pose), a start, a step budget, and tolerances (radians, pixels)."""
+
+    def __init__(self, seed, n, dtype=torch.float64, steps=150):
+        g = generator(seed)
+        spread = torch.tensor([0.2, 1.5, 1.5], dtype=torch.float64)[-n:]
+        offset = torch.tensor([0.3, 3.0, 3.0], dtype=torch.float64)[-n:]
+        self.true = torch.randn(n, generator=g, dtype=torch.float64) * spread
+        self.start = (self.true + (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * offset).to(dtype)
+        self.target = _triangle_image(self.true.to(dtype))
+        self.steps, self.dtype, self.calls, self.seen = steps, dtype, 0, []
+
+    def render(self, pose):
+        self.calls += 1
+        pose = torch.as_tensor(pose)
+        self.seen.append(pose.detach().to(torch.float64).clone())
+        return _triangle_image(pose)
+
+    def errors(self, pose):
+        """(angle error in degrees or None, shift error in pixels)."""
+        d = (torch.as_tensor(pose).detach().to(torch.float64) - self.true).abs()
+        return (math.degrees(float(d[0])) if d.shape[0] == 3 else None), float(d[-2:].norm())
+
+    def loss(self, pose):
+        with torch.no_grad():
+            return float(((_triangle_image(pose.to(self.dtype)) - self.target) ** 2).mean())
 
 
-def _run_steps(fn, f, starts, lr, steps, stale=None):
-    """Run ``fn(params, loss_fn, lr)`` ``steps`` times on fresh leaves made from ``starts``; returns the params
-    list as given (the same objects), the losses returned, and the exception (if any)."""
-    params = [s.clone().requires_grad_(True) for s in starts]
-    if stale is not None:
-        for p, s in zip(params, stale):
-            p.grad = s.clone()
-    losses = []
+_ANGLE_TOL, _SHIFT_TOL = 0.5, 0.05                                        # degrees, pixels
+
+
+def _fit(render, target, pose0, steps, *, lr=0.1, decay=0.1, zero=True, maximize=False):
+    """10.3: Adam on the mean squared difference, the learning rate decaying to ``decay`` times itself; the
+    switches are the typical mistakes (``zero``: clear the gradients each step; ``maximize``: uphill)."""
+    pose = pose0.detach().clone().requires_grad_(True)
+    opt = torch.optim.Adam([pose], lr=lr, maximize=maximize)
+    schedule = torch.optim.lr_scheduler.ExponentialLR(opt, decay ** (1 / max(steps, 1)))
     for _ in range(steps):
-        losses.append(fn(params, lambda: f(*params), lr))
-    return params, losses
+        if zero:
+            opt.zero_grad()
+        loss = ((render(pose) - target) ** 2).mean()
+        loss.backward()
+        opt.step()
+        schedule.step()
+    return pose.detach()
 
 
-def _step_problem(impl, f, starts, lr, steps, label, stale=None) -> str | None:
-    name = f"gradient_step({label})"
-    listed = [s.clone().requires_grad_(True) for s in starts]
-    if stale is not None:
-        for p, s in zip(listed, stale):
-            p.grad = s.clone()
-    objects = list(listed)
-    got_losses = []
-    try:
-        for _ in range(steps):
-            got_losses.append(impl(listed, lambda: f(*listed), lr))
-    except RuntimeError as exc:
-        text = str(exc)
-        if "leaf Variable" in text or "in-place" in text:
-            return (f"{name}: {summarize_exception(exc)}: an in-place update of a parameter is recorded by "
-                    "autograd unless it runs under `with torch.no_grad():`")
-        raise
-    ref_params, ref_losses = _run_steps(_step, f, starts, lr, steps, stale)
-    for k, (p, q) in enumerate(zip(listed, objects)):
-        if p is not q:
-            return (f"{name}: params[{k}] was replaced by a new tensor: update the parameters in place "
-                    "(p -= lr * p.grad under torch.no_grad()), so that the caller's tensors (and an optimiser's "
-                    "references to them) see the step")
-        if not p.is_leaf or p.grad_fn is not None:
-            return (f"{name}: params[{k}] is no longer a leaf: the update was recorded in the graph; do it under "
-                    "torch.no_grad()")
-        if not p.requires_grad:
-            return f"{name}: params[{k}] no longer requires a gradient: keep requires_grad=True for the next step"
-    if all(torch.equal(p.detach(), s) for p, s in zip(listed, starts)):
-        return (f"{name}: the parameters did not change: move each one by -lr × its gradient, in place "
-                "(p -= lr * p.grad under torch.no_grad())")
-    for k, (p, q) in enumerate(zip(listed, ref_params)):
-        low = p.dtype == torch.float32
-        message = compare(p.detach(), q.detach(), name=f"{name}: params[{k}] after {steps} step(s)", check_dtype=True,
-                          **({} if low else dict(atol=1e-10, rtol=1e-10)))
-        if message is None:
-            continue
-        if "shape" in message or "dtype" in message:
-            return message
-        up, _ = _run_steps(lambda *a: _step(*a, sign=1.0), f, starts, lr, steps, stale)
-        if _close(p.detach(), up[k].detach(), 1e-8):
-            return f"{name}: the step went uphill: move against the gradient, p - lr × grad"
-        stale_run, _ = _run_steps(lambda *a: _step(*a, zero=False), f, starts, lr, steps, stale)
-        if _close(p.detach(), stale_run[k].detach(), 1e-8):
-            return (f"{name}: the gradients were not cleared: backward() adds to .grad, so the old gradient was "
-                    "added to this step's; set p.grad = None (or zero it) before backward()")
-        return message
-    for k, (got, want) in enumerate(zip(got_losses, ref_losses)):
-        value = torch.tensor(float(got), dtype=torch.float64) if isinstance(got, (int, float)) else to_tensor(got, f"{name}: the returned loss")
-        if value.numel() != 1:
-            return f"{name}: return the loss, one number, got shape {tuple(value.shape)}"
-        if abs(float(value) - float(want)) > 1e-9 * (1 + abs(float(want))):
-            after = float(f(*[p.detach() for p in ref_params])) if k == steps - 1 else None
-            if after is not None and abs(float(value) - after) <= 1e-9 * (1 + abs(after)):
-                return f"{name}: the returned loss is the one after the step: return the loss before it (the one you backpropagated)"
-            return (f"{name}: step {k}: returned loss {float(value):.6g}, expected {float(want):.6g} (the loss "
-                    "before the step)")
-        if isinstance(got, torch.Tensor) and got.requires_grad:
-            return f"{name}: the returned loss still holds the graph: return loss.detach() (or float(loss))"
-    return None
+def fit_pose_reference(render, target, pose0, steps):
+    """10.3: the pose (a detached tensor like pose0) minimising mean (render(pose) - target)², found in ``steps``
+    optimiser steps (one render each) from pose0."""
+    return _fit(render, target, pose0, steps)
 
 
-@task("10.3", "gradient_step", points=3, reference=("torch.optim.sgd", "SGD"))   # one SGD step (no momentum)
-def _check_gradient_step(impl):
-    forbidden = forbidden_call(impl, "gradient_step", FORBIDDEN)
+def _error_text(angle, shift):
+    return (f"{angle:.3g}° and " if angle is not None else "") + f"{shift:.3g} px"
+
+
+def _fit_problem(impl, problem, label) -> str | None:
+    name = f"fit_pose({label})"
+    pose0 = problem.start.clone()
+    out = impl(problem.render, problem.target.clone(), pose0, problem.steps)
+    if not torch.equal(pose0, problem.start):
+        return f"{name}: pose0 was changed in place: copy it (pose0.detach().clone()) and optimise the copy"
+    got = to_tensor(out, name)
+    if got.shape != problem.start.shape:
+        return f"{name}: return the pose, shape {tuple(problem.start.shape)}, got {tuple(got.shape)}"
+    if problem.calls > problem.steps + 1:
+        return (f"{name}: render was called {problem.calls} times for a budget of {problem.steps} steps: render "
+                "once per step (and reuse that image for the loss)")
+    if not bool(torch.isfinite(got).all()):
+        return f"{name}: the pose came back NaN or inf: the steps are far too large"
+    start_angle, start_shift = problem.errors(problem.start)
+    angle, shift = problem.errors(got)
+    if torch.equal(got.to(problem.start.dtype), problem.start):
+        return (f"{name}: the pose did not move: the optimiser must hold the tensor you render with "
+                "(requires_grad=True, not detached), and step it after each backward()")
+    if (angle is None or angle <= _ANGLE_TOL) and shift <= _SHIFT_TOL:
+        return None
+    start_loss, end_loss = problem.loss(problem.start), problem.loss(got)
+    before = _error_text(start_angle, start_shift)
+    after = _error_text(angle, shift)
+    need = (f"{_ANGLE_TOL:g}° and " if angle is not None else "") + f"{_SHIFT_TOL:g} px"
+    if end_loss > start_loss:
+        return (f"{name}: the fit went uphill: the error grew from {before} to {after}; step against the "
+                "gradient (minimise the loss)")
+    seen = [problem.loss(p) for p in problem.seen]
+    if seen and min(seen) < 0.25 * seen[-1]:
+        return (f"{name}: the error went from {before} to {after}, above the {need} needed, and the loss went down "
+                "and up again: the steps are too large near the answer, or the gradients pile up (clear them "
+                "before each backward()); let the step size shrink as the fit settles")
+    return (f"{name}: not converged: the error fell from {before} to {after}, above the {need} needed, in "
+            f"{problem.steps} steps: take larger steps (an optimiser that adapts to each parameter's scale copes "
+            "with an angle in radians beside a shift in pixels)")
+
+
+@task("10.3", "fit_pose", points=5, reference=("course.grading.lecture10", "fit_pose_reference"))
+def _check_fit_pose(impl):
+    forbidden = forbidden_call(impl, "fit_pose", FORBIDDEN)
     if forbidden:
         return 0, forbidden
-    if _uses_torch_optim(impl):
-        return 0, ("gradient_step uses torch.optim, which does this task's work for you: write the update "
-                   "yourself (p -= lr * p.grad under torch.no_grad())")
 
-    def one_step():
-        f, x0 = _quadratic(121)
-        require(_step_problem(impl, f, [x0], 0.05, 1, "one step on |A x - b|², float64"))
-        f, x0 = _quadratic(122, n=1)
-        require(_step_problem(impl, f, [x0], 0.2, 1, "one parameter, float64"))
+    def shift():
+        require(_fit_problem(impl, _PoseProblem(131, 2), "a shift of 2 parameters, float64"))
+        require(_fit_problem(impl, _PoseProblem(132, 2), "another shift, float64"))
 
-    def several():
-        f, starts = _layer(123)
-        require(_step_problem(impl, f, starts, 0.1, 4, "4 steps on two parameters, float64"))
-        f, x0 = _quadratic(124)
-        require(_step_problem(impl, f, [x0], 0.02, 3, "3 steps, float64"))
+    def turn():
+        require(_fit_problem(impl, _PoseProblem(133, 3), "a turn and a shift: radians beside pixels, float64"))
+        require(_fit_problem(impl, _PoseProblem(134, 3), "another turn and shift, float64"))
 
-    def stress():
-        f, x0 = _quadratic(125)
-        require(_step_problem(impl, f, [x0], 0.05, 1, "a stale gradient left in .grad, float64",
-                              stale=[torch.full_like(x0, 7.0)]))
-        f, starts = _layer(126, torch.float32)
-        require(_step_problem(impl, f, starts, 0.1, 2, "float32"))
-    return grade_parts((1, "one step", one_step),
-                       (1, "several steps, two parameters", several),
-                       (1, "a stale gradient, float32", stress))
+    def budget():
+        require(_fit_problem(impl, _PoseProblem(135, 3, steps=100), "a budget of 100 steps, float64"))
+        require(_fit_problem(impl, _PoseProblem(136, 2, dtype=torch.float32), "a shift, float32"))
+    return grade_parts((2, "a shift", shift),
+                       (2, "a turn and a shift", turn),
+                       (1, "a smaller budget, float32", budget))
+
+
+# ---------------------------------------------------------------------- 10.4 the staircase, measured
+
+def _staircase(loss_fn, start, stop, n, *, runs="intervals", units=True, inclusive=True):
+    """10.4 and its typical mistakes: ``runs`` ("intervals": a flat run of k equal neighbours spans k intervals;
+    "samples": counted as k + 1 samples), ``units`` (the run in the parameter's units, else in samples),
+    ``inclusive`` (n samples from start to stop inclusive, else stop excluded)."""
+    if inclusive:
+        xs = torch.linspace(start, stop, n, dtype=torch.float64)
+    else:
+        xs = start + (stop - start) * torch.arange(n, dtype=torch.float64) / n
+    values = torch.tensor([float(loss_fn(x)) for x in xs], dtype=torch.float64)
+    same = (values[1:] == values[:-1]).tolist()
+    longest = run = 0
+    for s in same:
+        run = run + 1 if s else 0
+        longest = max(longest, run)
+    if runs == "samples" and longest > 0:
+        longest += 1
+    spacing = float(xs[1] - xs[0]) if n > 1 else 0.0
+    return len(same) - sum(same), longest * spacing if units else float(longest)
+
+
+def staircase_reference(loss_fn, start, stop, n):
+    """10.4: (jumps, longest_flat) of ``loss_fn`` sampled at n evenly spaced values from start to stop inclusive:
+    how many of the n - 1 intervals change the value, and the widest run of intervals over which it stays
+    exactly the same, in the parameter's units."""
+    return _staircase(loss_fn, start, stop, n)
+
+
+class _Landscape:
+    """A loss of one number, a shift in pixels along ``direction``: the mean squared difference between the
+    (hard or soft) triangle shifted and the hard triangle in place. Counts its calls."""
+
+    def __init__(self, direction, hard=True):
+        self.direction = torch.tensor(direction, dtype=torch.float64)
+        self.hard, self.calls = hard, 0
+        self.target = _triangle_image(torch.zeros(2, dtype=torch.float64), hard=True)
+
+    def __call__(self, x):
+        self.calls += 1
+        pose = torch.as_tensor(x, dtype=torch.float64).reshape(()) * self.direction
+        return ((_triangle_image(pose, hard=self.hard) - self.target) ** 2).mean()
+
+
+def _staircase_problem(impl, loss_fn, start, stop, n, label, which) -> str | None:
+    name = f"staircase({label})"
+    out = impl(loss_fn, start, stop, n)
+    if not (isinstance(out, (tuple, list)) and len(out) == 2):
+        return f"{name}: return two numbers, (jumps, longest_flat)"
+    if loss_fn.calls > n + 1:
+        return f"{name}: the loss was evaluated {loss_fn.calls} times for {n} samples: evaluate it once per sample"
+    jumps, flat = (float(v) if isinstance(v, (int, float)) else float(to_tensor(v, name).reshape(-1)[0])
+                   for v in out)
+    want_jumps, want_flat = _staircase(_Landscape(loss_fn.direction.tolist(), loss_fn.hard), start, stop, n)
+    if which == "jumps":
+        if jumps == want_jumps:
+            return None
+        shifted = _staircase(_Landscape(loss_fn.direction.tolist(), loss_fn.hard), start, stop, n, inclusive=False)
+        if jumps == shifted[0]:
+            return (f"{name}: {jumps:g} jumps, expected {want_jumps:g}: sample n values from start to stop, both "
+                    "ends included (torch.linspace)")
+        return (f"{name}: {jumps:g} jumps, expected {want_jumps:g}: count the intervals between neighbouring "
+                "samples whose loss values differ (n samples have n - 1 intervals)")
+    if abs(flat - want_flat) <= 1e-9 * (1 + abs(want_flat)):
+        return None
+    variants = [(_staircase(_Landscape(loss_fn.direction.tolist(), loss_fn.hard), start, stop, n, units=False)[1],
+                 "that is the run counted in intervals: give it in the parameter's units (times the spacing)"),
+                (_staircase(_Landscape(loss_fn.direction.tolist(), loss_fn.hard), start, stop, n, runs="samples")[1],
+                 "a run of k + 1 equal samples spans k intervals: measure the width between its first and last "
+                 "sample"),
+                (_staircase(_Landscape(loss_fn.direction.tolist(), loss_fn.hard), start, stop, n, inclusive=False)[1],
+                 "sample n values from start to stop, both ends included (torch.linspace)")]
+    for value, why in variants:
+        if abs(flat - value) <= 1e-9 * (1 + abs(value)):
+            return f"{name}: longest flat run {flat:.6g}, expected {want_flat:.6g}: {why}"
+    return f"{name}: longest flat run {flat:.6g}, expected {want_flat:.6g}"
+
+
+@task("10.4", "staircase", points=2, reference=("course.grading.lecture10", "staircase_reference"))
+def _check_staircase(impl):
+    forbidden = forbidden_call(impl, "staircase", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+
+    def cases(which):
+        def run():
+            require(_staircase_problem(impl, _Landscape((1.0, 0.0)), 0.0, 2.0, 201, "a hard loss along x, 201 "
+                                       "samples over 2 px", which))
+            require(_staircase_problem(impl, _Landscape((0.6, 0.8)), -1.5, 1.5, 121, "a hard loss along a slant, "
+                                       "121 samples", which))
+            require(_staircase_problem(impl, _Landscape((1.0, 0.0), hard=False), 0.0, 1.0, 51, "a soft loss, 51 "
+                                       "samples", which))
+        return run
+    return grade_parts((1, "the jumps", cases("jumps")),
+                       (1, "the longest flat run", cases("flat")))
