@@ -20,15 +20,15 @@ def test_a_mistake_is_said_once_whatever_the_cases_numbers():
 
 def test_a_long_message_is_wrapped_at_words_one_diagnosis_per_line():
     words = " ".join(f"word{i}" for i in range(60))
-    message = f"soft_silhouette(case one): {words}; soft_silhouette(case two): short"
-    text = format_result(Result("8.2", "soft_silhouette", 1, 3, message))
+    message = f"soft_blend(case one): {words}; soft_blend(case two): short"
+    text = format_result(Result("8.3", "soft_blend", 1, 3, message))
     lines = text.splitlines()
-    assert lines[0] == "Task 8.2 soft_silhouette: 1/3"
+    assert lines[0] == "Task 8.3 soft_blend: 1/3"
     assert all(len(line) <= MESSAGE_WIDTH for line in lines)
-    assert lines[1].startswith("    soft_silhouette(case one): word0")
-    assert lines[-1] == "    soft_silhouette(case two): short"
-    assert " ".join(line.strip() for line in lines[1:-1]) == f"soft_silhouette(case one): {words}"
-    assert format_result(Result("8.2", "soft_silhouette", 3, 3, "")) == "Task 8.2 soft_silhouette: 3/3"
+    assert lines[1].startswith("    soft_blend(case one): word0")
+    assert lines[-1] == "    soft_blend(case two): short"
+    assert " ".join(line.strip() for line in lines[1:-1]) == f"soft_blend(case one): {words}"
+    assert format_result(Result("8.3", "soft_blend", 3, 3, "")) == "Task 8.3 soft_blend: 3/3"
 
 
 def test_a_check_cell_prints_its_score_once(capsys):

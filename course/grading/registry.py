@@ -276,19 +276,16 @@ def format_result(result: Result) -> str:
     ``Result.message`` itself stays one line: the grader's score table and JSON hold it as it is."""
     line = f"Task {result.task} {result.name}: {result.points}/{result.max_points}"
     if result.message and (result.points < result.max_points or not result.max_points):
-        for diagnosis in _diagnoses(result.message):
+        for diagnosis in _diagnoses(result.message, result.name):
             line += "\n" + textwrap.fill(diagnosis, MESSAGE_WIDTH, initial_indent="    ", subsequent_indent="      ",
                                          break_long_words=False, break_on_hyphens=False)
     return line
 
 
-def _diagnoses(message: str) -> list[str]:
+def _diagnoses(message: str, name: str) -> list[str]:
     """A message split where ``grade_parts`` joined its diagnoses: at "; " followed by a case's label, which
-    names the student's function with its arguments ("soft_blend(tiny gamma ...): ...")."""
-    parts = [message]
-    for name in {t.name for t in TASKS.values()}:
-        parts = [piece for part in parts for piece in _split_before(part, "; " + name + "(")]
-    return parts
+    names the task's function ``name`` with its arguments ("soft_blend(tiny gamma ...): ...")."""
+    return _split_before(message, "; " + name + "(")
 
 
 def _split_before(text: str, marker: str) -> list[str]:
