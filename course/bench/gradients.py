@@ -494,49 +494,19 @@ def format_table(rows) -> str:
 
 
 def plot_pareto(rows, path=None):
-    """Log-log: time (ms) against relative L2 error to the exact gradient, a panel per (scene, weights), a line
-    per method family (edge sampling, FD float64, ..., Mitsuba), each point labelled with its setting; the
-    exact gradient's own time as a dashed vertical line. rows: ``bench_gradients`` rows. path: where to save
-    it (None: don't). Returns the matplotlib figure. Raises ValueError on no rows."""
-    import matplotlib.pyplot as plt
+    """Log-log: time (ms, forward + gradient) against relative L2 error to the exact gradient, a panel per
+    (scene, weights), four to a row, a line per method family (edge sampling, FD float64, ..., Mitsuba), each
+    point labelled with its setting; the exact gradient's own time as a dashed vertical line (lecture 09's figure,
+    ``course.viz.plot_error_cost``, with each row's own time). rows: ``bench_gradients`` rows. path: where to
+    save it (None: don't). Returns the matplotlib figure. Raises ValueError on no rows."""
+    from ..viz.gradients import plot_error_cost
     rows = list(rows)
     if not rows:
         raise ValueError("plot_pareto: no rows to plot")
-    panels = list(dict.fromkeys((r["scene"], r["weights"]) for r in rows))
-    families = list(dict.fromkeys(r["family"] for r in rows if r["method"] != "exact"))
-    ncol = min(4, len(panels))
-    nrow = -(-len(panels) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.8 * nrow), squeeze=False)
-    floor = 1e-16
-    for a, (scene, kind) in zip(axes.flat, panels):
-        mine = [r for r in rows if (r["scene"], r["weights"]) == (scene, kind)]
-        for r in mine:
-            if r["method"] == "exact":
-                a.axvline(r["ms"], color="0.3", ls="--", lw=1, label="exact (reference)")
-        for i, fam in enumerate(families):
-            pts = [r for r in mine if r["family"] == fam and not math.isnan(r["rel"])]
-            if not pts:
-                continue
-            a.plot([r["ms"] for r in pts], [max(r["rel"], floor) for r in pts], marker="os^vDp<>"[i % 8],
-                   color=f"C{i % 10}", ls=":" if "other image" in fam else "-", label=fam)
-            for r in pts:
-                if r["param"]:
-                    a.annotate(r["param"], (r["ms"], max(r["rel"], floor)), fontsize=6, xytext=(3, 2),
-                               textcoords="offset points", color=f"C{i % 10}")
-        a.set_xscale("log")
-        a.set_yscale("log")
-        a.set_xlabel("time, forward + gradient (ms)")
-        a.set_ylabel("relative L2 error to exact")
-        a.set_title(f"{scene}, {kind} weights", fontsize=9)
-        a.grid(True, which="both", alpha=0.3)
-    for a in axes.flat[len(panels):]:
-        a.axis("off")
-    handles = {}
-    for a in axes.flat[:len(panels)]:
-        for h, lab in zip(*a.get_legend_handles_labels()):
-            handles.setdefault(lab, h)
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(len(handles), 5), fontsize=8)
-    fig.tight_layout(rect=(0, 0.06 if nrow > 1 else 0.12, 1, 1))
+    panels = {}
+    for r in rows:
+        panels.setdefault(f"{r['scene']}, {r['weights']} weights", []).append(r)
+    fig = plot_error_cost(panels, cols=4, whole_gradient=False)
     if path:
         fig.savefig(path, dpi=110)
     return fig

@@ -22,16 +22,21 @@ def full_gradient_ms(row: dict) -> float:
     return row["ms"] * total / k
 
 
-def plot_error_cost(panels: dict, size: tuple[float, float] = (4.6, 3.6)):
-    """Log-log: time of the whole gradient (ms, this machine; ``full_gradient_ms``) against the relative L2
-    error to the exact gradient. ``panels``: title -> ``course.bench.gradients`` rows of one scene and one kind
-    of weights. One line per method family, each point labelled with its setting (a family of one setting names it in
-    the legend); the exact gradient's own time
-    as a dashed vertical line; errors below ``FLOOR`` drawn at it. One legend under the panels. Returns the
-    figure."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(size[0] * len(panels), size[1]), squeeze=False)
+def plot_error_cost(panels: dict, size: tuple[float, float] = (4.6, 3.6), cols: int | None = None,
+                    whole_gradient: bool = True):
+    """Log-log: time (ms, this machine) against the relative L2 error to the exact gradient. ``panels``: title ->
+    ``course.bench.gradients`` rows of one scene and one kind of weights, drawn ``cols`` panels to a row (None:
+    all in one row). whole_gradient: the time of the whole gradient (``full_gradient_ms``: finite differences
+    scaled from their subset of vertices to all of them); False: each row's own time (``bench gradients``'
+    plot). One line per method family, each point labelled with its setting (a family of one setting names it
+    in the legend); the exact gradient's own time as a dashed vertical line; errors below ``FLOOR`` drawn at it.
+    One legend under the panels. Returns the figure."""
+    cols = min(cols or len(panels), len(panels))
+    rows_of_panels = -(-len(panels) // cols)
+    fig, axes = plt.subplots(rows_of_panels, cols, figsize=(size[0] * cols, size[1] * rows_of_panels), squeeze=False)
     families = list(dict.fromkeys(r["family"] for rows in panels.values() for r in rows if r["method"] != "exact"))
-    for ax, (title, rows) in zip(axes[0], panels.items()):
+    time = full_gradient_ms if whole_gradient else (lambda r: r["ms"])
+    for ax, (title, rows) in zip(axes.flat, panels.items()):
         for r in rows:
             if r["method"] == "exact":
                 ax.axvline(r["ms"], color="0.3", ls="--", lw=1, label="exact (reference)")
@@ -39,7 +44,7 @@ def plot_error_cost(panels: dict, size: tuple[float, float] = (4.6, 3.6)):
             pts = [r for r in rows if r["family"] == family and not math.isnan(r["rel"])]
             if not pts:
                 continue
-            xs, ys = [full_gradient_ms(r) for r in pts], [max(r["rel"], FLOOR) for r in pts]
+            xs, ys = [time(r) for r in pts], [max(r["rel"], FLOOR) for r in pts]
             single = len({r["param"] for r in pts}) == 1                    # one setting: say it in the legend
             ax.plot(xs, ys, marker="os^vDp<>"[i % 8], color=f"C{i % 10}", ls=":" if "other image" in family else "-",
                     label=f"{family}, {pts[0]['param']}" if single and pts[0]["param"] else family)
@@ -48,14 +53,17 @@ def plot_error_cost(panels: dict, size: tuple[float, float] = (4.6, 3.6)):
                     ax.annotate(r["param"], (x, y), fontsize=7, xytext=(5, 3) if k % 2 == 0 else (-5, -10),
                                 ha="left" if k % 2 == 0 else "right", textcoords="offset points",
                                 color=f"C{i % 10}")
-        ax.set(xscale="log", yscale="log", xlabel="time of the whole gradient (ms)", title=title)
+        xlabel = "time of the whole gradient (ms)" if whole_gradient else "time, forward + gradient (ms)"
+        ax.set(xscale="log", yscale="log", xlabel=xlabel, title=title)
         ax.margins(x=0.1, y=0.12)                                           # room for the labels
         ax.set_ylabel("relative error to exact")
         ax.grid(True, which="major", alpha=0.3)
+    for ax in axes.flat[len(panels):]:
+        ax.axis("off")
     handles = {}
-    for ax in axes[0]:
+    for ax in axes.flat[:len(panels)]:
         for h, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, h)
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(len(handles), 4), fontsize=8)
-    fig.tight_layout(rect=(0, 0.13, 1, 1))
+    fig.tight_layout(rect=(0, 0.13 / rows_of_panels, 1, 1))
     return fig
