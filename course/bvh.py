@@ -45,6 +45,7 @@ from dataclasses import dataclass
 
 import torch
 
+from . import kernels
 from .intersect import _slab, _watertight
 from .tensors import _as_faces, _check_count, _check_flag, _check_shape, as_tensor
 
@@ -242,8 +243,11 @@ class BVH:
         bary = torch.zeros((N, 3), dtype=dtype, device=self.device)
         if self.num_nodes == 0 or N == 0:
             return Hits(face, t, bary)
+        verts = self._corners(dtype)                                        # (F, 3) each: quick row gathers
+        if kernels.active(o):                                               # the compiled twin: one loop per ray
+            self._kernel_traverse(o, d, t_lo, t_hi, verts, any_hit, face, t, bary)
+            return Hits(face, t, bary)
         tris = self.tris.to(dtype)
-        verts = [tris[:, i].contiguous() for i in range(3)]                 # (F, 3) each: quick row gathers
         for s in range(0, N, chunk):
             sl = slice(s, min(s + chunk, N))
             f = self._traverse(o[sl], d[sl], t_lo[sl], t_hi[sl], verts, any_hit, packet)   # face hit
@@ -253,6 +257,30 @@ class BVH:
                 tw, bw, _ = _watertight(o[r], d[r], *tris[self._slot[f[ok]]].unbind(1))
                 face[r], t[r], bary[r] = f[ok], tw, bw
         return Hits(face, t, bary)
+
+    def _corners(self, dtype):
+        """The triangles' three corners in slot order, (F, 3) contiguous each, in ``dtype`` (kept for reuse)."""
+        cache = self.__dict__.setdefault("_corner_cache", {})
+        if dtype not in cache:
+            tris = self.tris.to(dtype)
+            cache[dtype] = [tris[:, i].contiguous() for i in range(3)]
+        return cache[dtype]
+
+    def _kernel_traverse(self, o, d, t_lo, t_hi, verts, any_hit, face, t, bary):
+        """``_traverse`` and the winners' t and bary by ``kernels.traverse.closest_hits``, written into
+        face, t, bary: the same values, one compiled loop per ray."""
+        import numba
+
+        from .kernels import threads
+        from .kernels.traverse import closest_hits
+        if getattr(self, "_flat", None) is None:                            # the tree as numpy arrays, once
+            boxes = self.boxes.double()
+            self._flat = tuple(x.contiguous().numpy() for x in (boxes[:, 0], boxes[:, 1], self.left, self.first,
+                                                                  self.count, self.order))
+        numba.set_num_threads(threads())
+        rays = [x.contiguous().numpy() for x in (o, d, t_lo, t_hi)]
+        closest_hits(*rays, *self._flat, *(v.numpy() for v in verts), any_hit, self.depth + 2,
+                     face.numpy(), t.numpy(), bary.numpy())
 
     def _one_by_one(self, o, d, t_lo, t_hi, boxes, tris, any_hit):
         """Incoherent rays, one by one: a frontier of (ray, node) pairs whose box the ray's segment meets,

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import torch
 
+from . import kernels
 from .camera import Camera, world_to_camera
 from .scan import (EMPTY_KEY, _ScreenTriangles, _depth_keys, _faces_of, _is_top_left, _max3, _min3, _nearest,
                    _sample_zbuffer, _zbuffer, edge_function, pixel_triangle_pairs)
@@ -378,6 +379,8 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     """
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     device = verts.device
+    if kernels.active(face_map, verts) and not _records_graph(verts, camera):
+        return _kernel_surface(face_map, verts, faces, camera, H, W)        # no gradient: the compiled twin
     pix = (face_map >= 0).nonzero().squeeze(1)                              # (M,) covered pixels
     pix_d = pix.double()
     row = torch.floor((pix_d + 0.5) / W)                                    # exact for any image size
@@ -388,17 +391,67 @@ def _visible_surface(face_map, verts, faces, camera, H, W):
     return bary_img.view(H, W, 3), depth_img.view(H, W)
 
 
+def _records_graph(verts, camera) -> bool:
+    """Would autograd record the surface stage? (a gradient is enabled and verts, K, R or t need one)"""
+    return torch.is_grad_enabled() and any(getattr(x, "requires_grad", False)
+                                           for x in (verts, camera.K, camera.R, camera.t))
+
+
+def _kernel_surface(face_map, verts, faces, camera, H, W):
+    """``_visible_surface`` by ``kernels.surface.pixel_surface`` where no gradient is recorded: the per-face
+    table from ``_face_table`` (the faces some pixel sees), then one compiled loop over the pixels. The same
+    numbers, bit for bit."""
+    from .kernels.surface import faces_seen, pixel_surface
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    bary = torch.zeros(H * W, 3, dtype=dtype)
+    depth = torch.full((H * W,), float("inf"), dtype=dtype)
+    fm = face_map.contiguous().numpy()
+    row, n = faces_seen(fm, faces.shape[0])
+    if n:
+        used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
+        coef, z = _face_table(used, verts, faces, camera)
+        K = camera.K.to(dtype)
+        xs = torch.arange(W, dtype=torch.float64).add_(0.5).to(dtype) - K[0, 2]   # as _surface_at: x - cx
+        ys = torch.arange(H, dtype=torch.float64).add_(0.5).to(dtype) - K[1, 2]
+        consts = torch.tensor([1.0, torch.finfo(dtype).tiny ** 0.5], dtype=dtype)
+        pixel_surface(fm, row, *(x.detach().contiguous().numpy() for x in (coef, z, xs, ys, consts)),
+                      bary.numpy(), depth.numpy())
+    return bary.view(H, W, 3), depth.view(H, W)
+
+
 def _surface_at(face, x, y, verts, faces, camera):
     """``_visible_surface`` at arbitrary screen points: face (M,) int64 (all >= 0) and the points' float64
     image coordinates x, y (M,). Returns bary (M, 3) and depth (M,), differentiable."""
     dtype = torch.promote_types(verts.dtype, camera.dtype)
-    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
+    K = camera.K.to(dtype)
     if faces.shape[0] <= face.numel():                                       # few faces: a table row for each
         used, row_of_face = None, face
     else:                                                                   # many: only faces some pixel sees
         seen = torch.bincount(face, minlength=faces.shape[0]) > 0
         used = seen.nonzero().squeeze(1)                                    # (U,)
         row_of_face = (torch.cumsum(seen, 0) - 1).index_select(0, face)
+    coef, z = _face_table(used, verts, faces, camera)
+    coef, z = coef.index_select(0, row_of_face), z.index_select(0, row_of_face)   # (M, 9), (M, 3)
+    qx = x.to(dtype)[:, None] - K[0, 2]                                     # (M, 1) point x - cx
+    qy = y.to(dtype)[:, None] - K[1, 2]                                     # (M, 1) y - cy
+    w = coef[:, 0:3] * qx                                                   # (M, 3): w1, w2, Σw
+    w += coef[:, 3:6] * qy                                                  # in place: one (M, 3) buffer
+    w += coef[:, 6:9]
+    del coef, qx, qy                                                        # freed before the next buffers
+    tiny = torch.finfo(dtype).tiny ** 0.5
+    s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
+    b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
+    bary = torch.stack([1 - b1 - b2, b1, b2], 1)                            # (M, 3)
+    depth = z[:, 0] + b1 * z[:, 1] + b2 * z[:, 2]                           # z0 + b1 e1_z + b2 e2_z
+    return bary, depth
+
+
+def _face_table(used, verts, faces, camera):
+    """Per face (``used`` (U,) ids, or None: every face), the coefficients of its three affine functions of
+    the pixel's offset to the principal point, coef (U, 9) = (A1 A2 AΣ, B1 B2 BΣ, C1 C2 CΣ) with
+    w_k = A_k (x - cx) + B_k (y - cy) + C_k, and z (U, 3) = (z0, e1_z, e2_z). See ``_visible_surface``."""
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
     v_world = verts.to(dtype)[faces if used is None else faces.index_select(0, used)]   # (U, 3, 3)
     # camera-space v0 in float64: R x + t cancels digits when the scene sits far from the origin
     v0 = (_mat3(R.double(), v_world[:, 0].double()) + t.double()).to(dtype)   # (U, 3)
@@ -415,20 +468,8 @@ def _surface_at(face, x, y, verts, faces, camera):
     # principal point is formed exactly first, so no large terms cancel; per face, w_k = A x' + B y' + C
     rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹
     const = rows[..., 2] * (1 - K[2, 2]) + c[..., 2]                        # (U, 3)
-    coef = torch.cat([rows[..., 0], rows[..., 1], const], 1).index_select(0, row_of_face)   # (M, 9)
-    qx = x.to(dtype)[:, None] - K[0, 2]                                     # (M, 1) point x - cx
-    qy = y.to(dtype)[:, None] - K[1, 2]                                     # (M, 1) y - cy
-    w = coef[:, 0:3] * qx                                                   # (M, 3): w1, w2, Σw
-    w += coef[:, 3:6] * qy                                                  # in place: one (M, 3) buffer
-    w += coef[:, 6:9]
-    del coef, qx, qy                                                        # freed before the next buffers
-    tiny = torch.finfo(dtype).tiny ** 0.5
-    s = torch.where(w[:, 2].abs() < tiny, torch.full_like(w[:, 2], tiny), w[:, 2])   # edge-on faces: finite
-    b1, b2 = w[:, 0] / s, w[:, 1] / s                                       # (M,) each
-    bary = torch.stack([1 - b1 - b2, b1, b2], 1)                            # (M, 3)
-    z = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1).index_select(0, row_of_face)   # (M, 3) z0, e1_z, e2_z
-    depth = z[:, 0] + b1 * z[:, 1] + b2 * z[:, 2]                           # z0 + b1 e1_z + b2 e2_z
-    return bary, depth
+    coef = torch.cat([rows[..., 0], rows[..., 1], const], 1)                # (U, 9)
+    return coef, torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)             # (U, 3) z0, e1_z, e2_z
 
 
 # --------------------------------------------------------------------------------------------- public API

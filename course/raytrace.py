@@ -3,7 +3,7 @@
 Rasterization asks "which pixels does this triangle cover?"; ray tracing asks the transposed question,
 "which triangle does this ray hit first?". Both answer with the same ``Fragments``, so every shader works on
 both, and ``raycast`` takes its barycentrics and depth from the very function ``rasterize`` uses
-(``raster._surface_at``): the two visibility stages hand identical, differentiable inputs to shading.
+(``raster._visible_surface``): the two visibility stages hand identical, differentiable inputs to shading.
 
 The pieces live in three modules, one question each: ``course.intersect`` (does this ray hit this triangle,
 this box?), ``course.bvh`` (which of a million triangles can this ray hit?) and this one (rays from a
@@ -21,9 +21,10 @@ import math
 
 import torch
 
+from . import kernels
 from .bvh import BVH, Hits, morton_codes
 from .intersect import _slab, _watertight, intersect_triangles, moller_trumbore, ray_box  # noqa: F401 (re-exported)
-from .raster import Fragments, _check_inputs, _surface_at
+from .raster import Fragments, _check_inputs, _visible_surface
 from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = ["intersect_triangles", "moller_trumbore", "ray_box", "morton_codes", "BVH", "Hits", "raycast", "visible",
@@ -75,7 +76,7 @@ def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     down to about 1e-12). Below that ``rasterize`` calls the depths a tie (lower face id), while here the
     rounding of t decides: on coplanar overlapping faces the two (and ``coverage.exact_coverage``, whose
     coplanarity tolerance is ~2e-9) may show different faces. The barycentrics and depth come from
-    ``raster._surface_at``, exactly as in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and
+    ``raster._visible_surface``, exactly as in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and
     K, R, t. Returns Fragments (H, W).
     """
     verts, faces = _check_inputs(mesh, camera)
@@ -85,19 +86,15 @@ def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     elif not isinstance(bvh, BVH) or bvh.order.numel() != faces.shape[0]:
         raise ValueError("bvh must be a BVH built from this mesh")
     o, d, dz = _camera_rays(camera)
-    tiles = _tile_order(H, W, o.device)                                     # 4 x 4 tiles: coherent packets
-    o, d, dz = o.index_select(0, tiles), d.index_select(0, tiles), dz.index_select(0, tiles)
+    tiles = None if kernels.active(o, bvh.boxes) else _tile_order(H, W, o.device)   # 4 x 4 tiles: packets
+    if tiles is not None:                                                   # (the compiled walk needs none)
+        o, d, dz = o.index_select(0, tiles), d.index_select(0, tiles), dz.index_select(0, tiles)
     with torch.no_grad():                                                   # which face: not differentiable
         hit = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(camera.near / dz).to(bvh.device),
                             t_max=(camera.far / dz).to(bvh.device)).face_id.to(verts.device)
-    face = torch.empty_like(hit).index_put_((tiles.to(verts.device),), hit)  # back to row-major pixels
-    dtype = torch.promote_types(verts.dtype, camera.dtype)
-    pix = (face >= 0).nonzero().squeeze(1)
-    x, y = (pix % W).double() + 0.5, (pix // W).double() + 0.5
-    bary, depth = _surface_at(face.index_select(0, pix), x, y, verts, faces, camera)
-    bary_img = torch.zeros(H * W, 3, dtype=dtype, device=verts.device).index_put((pix,), bary)
-    depth_img = torch.full((H * W,), math.inf, dtype=dtype, device=verts.device).index_put((pix,), depth)
-    return Fragments(face.view(H, W), bary_img.view(H, W, 3), depth_img.view(H, W))
+    face = hit if tiles is None else torch.empty_like(hit).index_put_((tiles.to(verts.device),), hit)
+    bary, depth = _visible_surface(face, verts, faces, camera, H, W)       # as rasterize: same numbers
+    return Fragments(face.view(H, W), bary, depth)
 
 
 # ------------------------------------------------------------------------------- shadow rays, area lights

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import torch
 
+from . import kernels
 from .tensors import _check_count, _check_finite, as_tensor
 
 __all__ = ["edge_function", "pixel_triangle_pairs"]
@@ -328,9 +329,11 @@ def _chunks(st: _ScreenTriangles, width, height, budget):
 def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
     """Stage 2b: the nearest face per pixel, (H*W,) int64, -1 where none. One scatter-min per chunk."""
     H, W = camera.height, camera.width
-    zbuf = torch.full((H * W,), EMPTY_KEY, dtype=torch.int64, device=st.xy.device)
     if st.face.numel() == 0:
-        return torch.full_like(zbuf, -1)
+        return torch.full((H * W,), -1, dtype=torch.int64, device=st.xy.device)
+    if kernels.active(st.xy):                                               # the compiled twin
+        return _kernel_zbuffer(st, camera)
+    zbuf = torch.full((H * W,), EMPTY_KEY, dtype=torch.int64, device=st.xy.device)
     ties = _NearTies(zbuf) if REFINE_TIES else None
     filled = False
     for chunk in _chunks(st, W, H, budget):
@@ -352,6 +355,31 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
     return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *centre(slots)))
 
 
+
+
+def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
+    """``_zbuffer`` by ``kernels.zbuffer.nearest_faces``: the same face ids, one compiled loop over the
+    triangles, their rows and pixels; the near-ties it notes are decided by ``_NearTies.resolve`` as here."""
+    from .kernels.zbuffer import nearest_faces
+    H, W = camera.height, camera.width
+    plane = [x.contiguous().numpy() for x in _plane(st)]
+    args = (st.xy.contiguous().numpy(), *plane, st.face.contiguous().numpy(), W, H, bool(camera.orthographic),
+            float(camera.far), bool(st.crosses_far))
+    capacity = max(1024, 2 * H * W)
+    while True:
+        faces = torch.full((H * W,), -1, dtype=torch.int64)
+        depth = torch.full((H * W,), float("inf"), dtype=torch.float64)
+        notes = torch.empty((capacity, 2), dtype=torch.int64)
+        n = nearest_faces(*args, faces.numpy(), depth.numpy(), notes.numpy())
+        if n <= capacity:
+            break
+        capacity = n                                                        # rare: coplanar faces everywhere
+    if n == 0:
+        return faces
+    ties = _NearTies(faces)
+    ties.slots, ties.faces = [notes[:n, 0]], [notes[:n, 1]]
+    centre = lambda slots: ((slots % W).double() + 0.5, (slots // W).double() + 0.5)   # noqa: E731
+    return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *centre(slots)))
 
 
 # ------------------------------------------- stage 2, sub-pixel samples: the pixels a triangle touches

@@ -7,11 +7,15 @@ from hypothesis import given, settings, strategies as st
 
 import course.raster as raster
 import course.scan as scan
+from course import kernels
 from course.camera import Camera, axis_angle_to_matrix
 from course.mesh import Mesh
 from course.models import cube, icosphere, plane
 from course.raster import (Fragments, barycentric_2d, edge_function, inside_triangle, interpolate,
                            perspective_correct_bary, rasterize, rasterize_naive, zbuffer_resolve)
+
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
 
 
 def ortho8(width=8, height=8, dtype=torch.float64):
@@ -468,8 +472,9 @@ def test_near_ties_rasterize_raycast_and_exact_coverage_agree(orthographic, d0, 
     image = exact_coverage(mesh, cam, colors)                                  # every pixel fully covered
     torch.testing.assert_close(image, colors[2].expand(6, 6, 3))
     if separation < 1e-7:                                                      # float32 keys alone: a tie
-        monkeypatch.setattr(scan, "REFINE_TIES", False)
-        assert bool((rasterize(mesh, cam).face_id <= 1).all())                  # the lower id, the far plane
+        monkeypatch.setattr(scan, "REFINE_TIES", False)                        # (a switch of the torch path)
+        with kernels.using("torch"):
+            assert bool((rasterize(mesh, cam).face_id <= 1).all())              # the lower id, the far plane
 
 
 @pytest.mark.parametrize("orthographic", [False, True])

@@ -14,6 +14,9 @@ import torch
 from course import Mesh, rasterize
 from course.bench.precision import errors, moved, scene
 
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
+
 EPS32 = torch.finfo(torch.float32).eps     # 1.2e-7
 
 

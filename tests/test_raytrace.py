@@ -13,6 +13,9 @@ from course.raster import rasterize
 from course.raytrace import (BVH, disk_light_samples, intersect_triangles, moller_trumbore, raycast,
                              rectangle_light_samples, visible)
 
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
+
 
 def brute_force(test, o, d, tris, t_min=0.0):
     """Every ray against every triangle: hit counts (N,), and the closest face (N,) and its t (N,)."""

@@ -1,0 +1,105 @@
+"""Compiled twins of the discrete stages: which face a ray or a pixel sees, as Numba loops (lectures 03 and 07).
+
+The renderer answers two discrete questions over and over: *which triangle does this ray hit first?*
+(``BVH.intersect``) and *which triangle is nearest at this pixel?* (the z-buffer of ``rasterize``). The torch
+versions answer them for every ray or pixel at once, as chains of vectorised operations over index tensors:
+the data-parallel way a GPU wants, and the way lecture 03 and 07 teach. On a CPU each of those operations is
+a separate pass over memory, where a renderer written in C keeps one ray or one triangle in registers from
+start to finish. The loops here are that C renderer, written in Python and compiled by Numba: each is the
+textbook pseudocode (one ray and its stack; one triangle and its rows), and each names the torch function
+it must agree with, face id for face id.
+
+* ``traverse.closest_hits``: a stack-based walk of the course's own BVH with the watertight test
+  (twin of ``BVH._traverse`` and ``intersect._watertight``).
+* ``zbuffer.nearest_faces``: scan conversion of every screen triangle with the top-left rule and a float64
+  depth test (twin of ``scan._spans`` and ``scan._zbuffer``).
+
+Only "which face" is compiled. Barycentrics, depth and everything after them are computed from the face ids
+by the same torch code as before, so every gradient is unchanged (the split nvdiffrast and PyTorch3D make).
+
+**Which path runs.** CPU tensors take the kernels when Numba is installed; CUDA tensors always take the
+torch path. ``set_backend("torch")`` (or the environment variable ``COURSE_KERNELS=torch``) forces the torch
+path everywhere, and ``using("torch")`` does so inside a ``with`` block, so a lecture can time one against
+the other and the tests run both. ``backend()`` says which is in force.
+
+**Compilation.** Each kernel is compiled the first time it runs with a new argument type (1-4 s) and
+cached on disk (``cache=True``): next to this file in ``__pycache__``, or, where the package is installed
+read-only, in Numba's per-user cache directory (``NUMBA_CACHE_DIR`` overrides both); a second process loads
+it in a few hundredths of a second. ``warm_up()`` compiles every kernel in advance (``python -m course
+bench`` reports the times).
+
+**Threads.** The ray kernel runs its rays in parallel on ``torch.get_num_threads()`` threads (Numba's
+``prange``), so ``torch.set_num_threads(1)`` gives one thread to both. The z-buffer kernel is one loop.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+
+__all__ = ["BACKENDS", "available", "backend", "set_backend", "using", "active", "warm_up", "threads"]
+
+BACKENDS = ("numba", "torch")
+_backend = os.environ.get("COURSE_KERNELS", "numba").strip().lower() or "numba"
+if _backend not in BACKENDS:
+    raise ValueError(f"COURSE_KERNELS must be one of {BACKENDS}, got {_backend!r}")
+
+try:                                                                        # a dependency, but guard anyway
+    import numba  # noqa: F401
+    _AVAILABLE, _WHY = True, ""
+except ImportError as err:                                                  # pragma: no cover
+    _AVAILABLE, _WHY = False, f"Numba is not installed ({err}); `pip install numba`"
+
+
+def available() -> bool:
+    """True when Numba can be imported (the kernels can run)."""
+    return _AVAILABLE
+
+
+def backend() -> str:
+    """The backend in force: "numba" (kernels on CPU tensors, when Numba is available) or "torch"."""
+    return _backend
+
+
+def set_backend(name: str) -> str:
+    """Choose "numba" or "torch" for every later call; returns the previous choice."""
+    global _backend
+    if name not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {name!r}")
+    previous, _backend = _backend, name
+    return previous
+
+
+@contextlib.contextmanager
+def using(name: str):
+    """``with using("torch"): ...`` runs the block on the given backend, then restores the previous one."""
+    previous = set_backend(name)
+    try:
+        yield
+    finally:
+        set_backend(previous)
+
+
+def active(*tensors) -> bool:
+    """Should a kernel run on these tensors? The "numba" backend, Numba installed, every tensor on the CPU."""
+    return _backend == "numba" and _AVAILABLE and all(t.device.type == "cpu" for t in tensors)
+
+
+def threads() -> int:
+    """Threads for the parallel kernels: torch's thread count, at most Numba's pool."""
+    import numba
+    import torch
+    return max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+
+
+def warm_up() -> dict:
+    """Compile (or load from the cache) every kernel for float32 and float64; returns seconds per kernel."""
+    if not _AVAILABLE:
+        raise RuntimeError(_WHY)
+    from . import traverse, zbuffer
+    times = {}
+    for name, fn in (("traverse", traverse.warm_up), ("zbuffer", zbuffer.warm_up)):
+        start = time.perf_counter()
+        fn()
+        times[name] = time.perf_counter() - start
+    return times

@@ -1,0 +1,129 @@
+"""The z-buffer as a compiled loop: one triangle, its rows, its pixels (twin of ``scan._zbuffer``, lecture 03).
+
+The pseudocode of every rasterizer::
+
+    for each triangle:
+        for each row its y-extent reaches:
+            the span of covered pixel centres, from the three edges (top-left rule on the boundary)
+            for each pixel of the span:
+                depth = 1 / q, q = 1/z affine on screen (z itself for an orthographic camera)
+                if depth is nearer than the z-buffer's: keep this face
+
+``nearest_faces`` runs it over the screen triangles of ``raster._screen_triangles`` and must give the face
+ids of ``scan._zbuffer``. Coverage: the span of every (triangle, row) is computed with ``scan._spans``'
+operations in its order (``_span`` below), so the same pixel centres are covered, bit for bit, and an edge
+shared by two triangles still gives one to each side. Visibility: ``scan._zbuffer`` returns the face nearest
+in float64, depths within ``scan.TIE_RTOL`` (relative) a tie that goes to the lower face id; here the float64
+depths are compared directly, and every pixel where two depths come within ``NOTE_RTOL`` (far above
+``TIE_RTOL``) of each other is noted, with both faces, for ``scan._NearTies.resolve`` to decide exactly as
+the torch path does. Without a near-tie the nearer face is nearer by more than a rounding error, and both
+paths pick it.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+__all__ = ["nearest_faces", "warm_up", "NOTE_RTOL"]
+
+NOTE_RTOL = 1e-9                # depths this close (relative) are noted for the exact tie rule
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _sign(v):
+    return (v > 0) - (v < 0)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _span(x, y, row_y, width):
+    """The first and last covered column of one triangle in one row (``scan._spans`` for one segment).
+
+    x, y: (3,) the screen vertices (positive area); row_y: the row's centre. Along the row, edge a→b is
+    ``E(px) = A px + r`` with ``A = a_y - b_y``: a left edge when A > 0 (the span starts right of its
+    crossing), a right edge when A < 0. A centre exactly on a crossing belongs to the triangle only on a top
+    or left edge. A horizontal edge keeps the whole row or none of it. Returns (first, last), float64;
+    first > last when the row is empty.
+    """
+    first, last = -1e18, 1e18
+    empty = False
+    for k in range(3):
+        ax, ay = x[k], y[k]
+        bx, by = x[(k + 1) % 3], y[(k + 1) % 3]
+        da, db = ay - row_y, by - row_y
+        s = _sign(ay - by)                                                  # +1 left edge, -1 right edge
+        if s == 0:                                                          # horizontal: inside or not at all
+            tl = 1 if bx > ax else 0
+            if min(max(2 * _sign(da) * _sign(ax - bx) + tl, 0), 1) == 0:
+                empty = True
+            continue
+        tl = 1 if s > 0 else 0                                              # top-left: here, a left edge
+        x0 = min(max((bx * da - ax * db) / (ay - by), -2.0), width + 2.0)  # the crossing, E(x0) = 0
+        f, c = math.floor(x0 - 0.5), math.ceil(x0 - 0.5)
+        on_centre = tl * (f + 1 - c)                                        # 1: a centre on a top-left edge
+        if s > 0:
+            first = max(first, f + 1 - on_centre)
+        else:
+            last = min(last, c - 1 + on_centre)
+    first = max(first, 0.0)
+    last = min(last, width - 1.0)
+    if empty:
+        last = first - 1
+    return first, last
+
+
+@numba.njit(cache=True, error_model="numpy")
+def nearest_faces(xy, q0, qx, qy, face, width, height, orthographic, far, check_far, face_map, depth_map,
+                  notes):
+    """The z-buffer: the nearest face at every pixel centre, and the pixels to decide by the exact tie rule.
+
+    xy: (T, 3, 2) float64 screen triangles (positive area); q0, qx, qy: (T,) their screen-affine
+    q = q0 + qx x + qy y (``scan._plane``); face: (T,) int64 face ids; far: the far plane, applied to the
+    float32 depth as ``scan._zbuffer`` does when ``check_far``. Fills face_map (H*W,) int64 (-1: no face)
+    and depth_map (H*W,) float64 (start: +inf). notes (K, 2) int64: (pixel, face) pairs whose depths came
+    within NOTE_RTOL of the pixel's nearest at the time. Returns the number of notes (more than K: the
+    buffer was too small and the call must be repeated with a larger one).
+    """
+    n_notes = 0
+    cap = notes.shape[0]
+    far32 = np.float32(far)
+    xs = np.empty(3, np.float64)
+    ys = np.empty(3, np.float64)
+    for t in range(xy.shape[0]):
+        for k in range(3):
+            xs[k], ys[k] = xy[t, k, 0], xy[t, k, 1]
+        y_min, y_max = min(ys[0], ys[1], ys[2]), max(ys[0], ys[1], ys[2])
+        r0 = int(max(math.ceil(y_min - 0.5), 0.0))                           # rows whose centres it reaches
+        r1 = int(min(math.floor(y_max - 0.5), height - 1.0))
+        a, b, c, f = q0[t], qx[t], qy[t], face[t]
+        for row in range(r0, r1 + 1):
+            row_y = row + 0.5
+            first, last = _span(xs, ys, row_y, width)
+            for col in range(int(first), int(last) + 1):
+                q = a + b * (col + 0.5) + c * row_y                         # scan._depth_at's order
+                depth = q if orthographic else 1.0 / q
+                if check_far:
+                    q32 = np.float32(q)
+                    d32 = q32 if orthographic else np.float32(1.0) / q32
+                    if not d32 <= far32:
+                        continue
+                p = row * width + col
+                best = depth_map[p]
+                if best != math.inf and abs(depth - best) <= NOTE_RTOL * abs(best):
+                    if n_notes + 2 <= cap:                                  # a near-tie: both faces noted
+                        notes[n_notes, 0], notes[n_notes, 1] = p, f
+                        notes[n_notes + 1, 0], notes[n_notes + 1, 1] = p, face_map[p]
+                    n_notes += 2
+                if depth < best or (depth == best and f < face_map[p]):
+                    depth_map[p], face_map[p] = depth, f
+    return n_notes
+
+
+def warm_up():
+    """Compile ``nearest_faces`` (or load it from the cache)."""
+    xy = np.array([[[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]]])
+    one = np.ones(1)
+    for ortho in (False, True):
+        nearest_faces(xy, one, 0 * one, 0 * one, np.zeros(1, np.int64), 4, 4, ortho, 10.0, True,
+                      np.full(16, -1, np.int64), np.full(16, np.inf), np.empty((8, 2), np.int64))
