@@ -274,8 +274,7 @@ class BVH:
         from .kernels import threads
         from .kernels.traverse import closest_hits
         if getattr(self, "_flat", None) is None:                            # the tree as numpy arrays, once
-            boxes = self.boxes.double()
-            self._flat = tuple(x.contiguous().numpy() for x in (boxes[:, 0], boxes[:, 1], self.left, self.first,
+            self._flat = tuple(x.contiguous().numpy() for x in (self.boxes.double(), self.left, self.first,
                                                                   self.count, self.order))
         numba.set_num_threads(threads())
         rays = [x.contiguous().numpy() for x in (o, d, t_lo, t_hi)]

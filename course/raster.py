@@ -294,6 +294,18 @@ def _project(p_cam, camera, K):
     return (xy1 @ K.T)[..., :2], q
 
 
+def _cross(a, b):
+    """``a × b`` for (..., 3) tensors, written out: ``torch.linalg.cross`` may fuse a multiply and an add on
+    one CPU and not on another, and a back-face decision must not depend on it (nor differ from the kernel's)."""
+    return torch.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                        a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], -1)
+
+
+def _dot(a, b):
+    """``a · b`` over the last axis of (..., 3) tensors, summed left to right."""
+    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
+
+
 def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float = 0.5) -> _ScreenTriangles:
     """Stage 1: drop faces outside [near, far] or facing away, clip at the near plane, project to pixels.
 
@@ -304,19 +316,34 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float 
     near, far, W, H = camera.near, camera.far, camera.width, camera.height
     K = camera.K.detach().to(torch.float64)
     F = faces.shape[0]
+    xy_v, q_v = _project(verts_cam, camera, K)                              # each vertex projected once
+    if kernels.active(verts_cam):                                           # the compiled twin, face by face
+        from .kernels.screen import screen_triangles
+        xy, q = verts_cam.new_empty((F, 3, 2)), verts_cam.new_empty((F, 3))
+        face, face_cross = faces.new_empty(F), faces.new_empty(F)
+        n, n_cross, crosses_far = screen_triangles(
+            verts_cam.contiguous().numpy(), faces.contiguous().numpy(), xy_v.contiguous().numpy(),
+            q_v.contiguous().numpy(), float(near), float(far), bool(cull_backfaces), bool(camera.orthographic),
+            W, H, float(reach), xy.numpy(), q.numpy(), face.numpy(), face_cross.numpy())
+        xy, q, face, face_cross = xy[:n], q[:n], face[:n], face_cross[:n_cross]
+        if n_cross:                                                         # clipped in torch, as below
+            tri_cam, ids = _clip_near(verts_cam, faces, face_cross, near)
+            xy_c, q_c = _project(tri_cam, camera, K)
+            xy_c, q_c, ids = _oriented_on_screen(xy_c, q_c, ids, W, H, reach)
+            xy, q, face = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids])
+        return _ScreenTriangles(xy, q, face, bool(crosses_far))
     flat = faces.reshape(-1)
     z = verts_cam[:, 2].contiguous().index_select(0, flat).view(F, 3)       # (F, 3)
     z_min, z_max = _min3(z), _max3(z)
     keep = (z_max >= near) & (z_min <= far)
     if cull_backfaces:
         v = verts_cam.index_select(0, flat).view(F, 3, 3)
-        normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])   # (F, 3), toward a CCW viewer
+        normal = _cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])               # (F, 3), toward a CCW viewer
         if camera.orthographic:
             keep &= normal[:, 2] < 0
         else:
-            keep &= (normal * v[:, 0]).sum(-1) < 0                          # n · (eye - v0) > 0
+            keep &= _dot(normal, v[:, 0]) < 0                               # n · (eye - v0) > 0
     whole = keep & (z_min >= near)
-    xy_v, q_v = _project(verts_cam, camera, K)                              # each vertex projected once
     sel = whole.nonzero().squeeze(1) if not bool(whole.all()) else None
     fw = faces if sel is None else faces.index_select(0, sel)
     face = torch.arange(F, device=faces.device) if sel is None else sel
@@ -327,8 +354,15 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float 
         tri_cam, ids = _clip_near(verts_cam, faces, face_cross, near)
         xy_c, q_c = _project(tri_cam, camera, K)
         xy, q, face = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids])
-    # reorder (v0, v1, v2) → (v0, v2, v1) where the screen area is negative, so every area is positive
-    # (a selection, not arithmetic: the coordinates must stay bit-identical to the neighbours' copies)
+    crosses_far = bool((z_max[keep] > far).any())
+    return _ScreenTriangles(*_oriented_on_screen(xy, q, face, W, H, reach), crosses_far)
+
+
+def _oriented_on_screen(xy, q, face, W, H, reach):
+    """Screen triangles xy (T, 3, 2), q (T, 3), face (T,) with corners reordered (v0, v1, v2) → (v0, v2, v1)
+    where the screen area is negative, so every area is positive (a selection, not arithmetic: the
+    coordinates stay bit-identical to the neighbours' copies), and only those with area that reach
+    ``reach`` into the W x H image kept."""
     area = edge_function(xy[:, 0], xy[:, 1], xy[:, 2])
     flip = (area < 0).long()
     order = torch.stack([torch.zeros_like(flip), 1 + flip, 2 - flip], 1)    # (T, 3) corner order
@@ -337,12 +371,10 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float 
     x, y = xy[..., 0], xy[..., 1]
     good = (area != 0) & (_max3(x) >= reach) & (_min3(x) <= W - reach)      # zero area: covers nothing
     good &= (_max3(y) >= reach) & (_min3(y) <= H - reach)
-    crosses_far = bool((z_max[keep] > far).any())
     if bool(good.all()):
-        return _ScreenTriangles(xy, q, face, crosses_far)
+        return xy, q, face
     good = good.nonzero().squeeze(1)
-    return _ScreenTriangles(xy.index_select(0, good), q.index_select(0, good), face.index_select(0, good),
-                            crosses_far)
+    return xy.index_select(0, good), q.index_select(0, good), face.index_select(0, good)
 
 
 # ------------------------------------------------------------- stage 3: the visible surface, differentiably
@@ -409,7 +441,7 @@ def _kernel_surface(face_map, verts, faces, camera, H, W):
     row, n = faces_seen(fm, faces.shape[0])
     if n:
         used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
-        coef, z = _face_table(used, verts, faces, camera)
+        coef, z = _kernel_face_table(used, verts, faces, camera)
         K = camera.K.to(dtype)
         xs = torch.arange(W, dtype=torch.float64).add_(0.5).to(dtype) - K[0, 2]   # as _surface_at: x - cx
         ys = torch.arange(H, dtype=torch.float64).add_(0.5).to(dtype) - K[1, 2]
@@ -417,6 +449,21 @@ def _kernel_surface(face_map, verts, faces, camera, H, W):
         pixel_surface(fm, row, *(x.detach().contiguous().numpy() for x in (coef, z, xs, ys, consts)),
                       bary.numpy(), depth.numpy())
     return bary.view(H, W, 3), depth.view(H, W)
+
+
+def _kernel_face_table(used, verts, faces, camera):
+    """``_face_table`` by ``kernels.surface.face_table``: the same numbers, one compiled loop over the faces
+    (K⁻¹ and 1 - K22 are formed here, in torch, as there)."""
+    from .kernels.surface import face_table
+    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    K = camera.K.detach().to(dtype)
+    R = camera.R.detach().to(dtype)
+    coef = torch.empty(used.shape[0], 9, dtype=dtype)
+    z = torch.empty(used.shape[0], 3, dtype=dtype)
+    arrays = (used, verts.detach().to(dtype), faces, camera.R.detach().double(), camera.t.detach().double(), R,
+              torch.linalg.inv(K).T, (1 - K[2, 2]).reshape(1))
+    face_table(*(x.contiguous().numpy() for x in arrays), bool(camera.orthographic), coef.numpy(), z.numpy())
+    return coef, z
 
 
 def _surface_at(face, x, y, verts, faces, camera):
@@ -459,11 +506,11 @@ def _face_table(used, verts, faces, camera):
     e2 = _mat3(R, v_world[:, 2] - v_world[:, 0])
     if camera.orthographic:                                                 # d = +z: only z of each cross
         zero = torch.zeros_like(e1[:, 0])
-        c = torch.stack([torch.stack([e2[:, 1], -e2[:, 0], torch.linalg.cross(e2, v0)[:, 2]], -1),
-                         torch.stack([-e1[:, 1], e1[:, 0], torch.linalg.cross(v0, e1)[:, 2]], -1),
-                         torch.stack([zero, zero, torch.linalg.cross(e1, e2)[:, 2]], -1)], 1)
+        c = torch.stack([torch.stack([e2[:, 1], -e2[:, 0], _cross(e2, v0)[:, 2]], -1),
+                         torch.stack([-e1[:, 1], e1[:, 0], _cross(v0, e1)[:, 2]], -1),
+                         torch.stack([zero, zero, _cross(e1, e2)[:, 2]], -1)], 1)
     else:                                                                   # T = -v0
-        c = torch.stack([torch.linalg.cross(e2, v0), torch.linalg.cross(v0, e1), torch.linalg.cross(e1, e2)], 1)
+        c = torch.stack([_cross(e2, v0), _cross(v0, e1), _cross(e1, e2)], 1)
     # w_k = c_k · d with d = K⁻¹ p = K⁻¹ q + e3, q = p - K e3 = (x - cx, y - cy, 1 - K22): the offset to the
     # principal point is formed exactly first, so no large terms cancel; per face, w_k = A x' + B y' + C
     rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹

@@ -362,9 +362,8 @@ def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
     triangles, their rows and pixels; the near-ties it notes are decided by ``_NearTies.resolve`` as here."""
     from .kernels.zbuffer import nearest_faces
     H, W = camera.height, camera.width
-    plane = [x.contiguous().numpy() for x in _plane(st)]
-    args = (st.xy.contiguous().numpy(), *plane, st.face.contiguous().numpy(), W, H, bool(camera.orthographic),
-            float(camera.far), bool(st.crosses_far))
+    args = (st.xy.contiguous().numpy(), st.q.contiguous().numpy(), st.face.contiguous().numpy(), W, H,
+            bool(camera.orthographic), float(camera.far), bool(st.crosses_far))
     capacity = max(1024, 2 * H * W)
     while True:
         faces = torch.full((H * W,), -1, dtype=torch.int64)

@@ -20,6 +20,7 @@
   Reynolds, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
   error, a table and a Pareto plot.
 * ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
+* ``kernels`` (``course.bench.kernels``): the compiled kernels' cold start, compile and cache-load times.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -32,10 +33,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 
 import torch
 
-from . import aa, fit, gradients, precision, raster, raytrace, shadows, skips, soft
+from . import aa, fit, gradients, kernels, precision, raster, raytrace, shadows, skips, soft
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -44,7 +46,8 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
-           "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit}
+           "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
+           "kernels": kernels}
 
 
 def cli(argv) -> int:
@@ -56,13 +59,18 @@ def cli(argv) -> int:
         sub.add_argument("--repeat", type=int, default=repeat,
                          help=f"timed runs per measurement (median reported; default {repeat})")
         sub.add_argument("--json", help="also write the rows to this JSON file")
-        sub.add_argument("--threads", type=int, help="torch threads (default: torch's choice); 1 gives steadier "
+        sub.add_argument("--threads", type=int, help="threads for torch, the compiled kernels and OpenGL's "
+                                                     "llvmpipe (default: their own choice); 1 gives steadier "
                                                      "timings on a machine shared with other jobs")
         module.add_arguments(sub)
     args = parser.parse_args(argv)
     if args.threads:
-        torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+        torch.set_num_threads(args.threads)                                 # the kernels follow torch's count
+        os.environ["LP_NUM_THREADS"] = str(args.threads)                    # Mesa's llvmpipe, read at context creation
+    from .. import kernels as compiled
+    path = ("compiled kernels (Numba) on CPU tensors" if compiled.backend() == "numba" and compiled.available()
+            else "the torch path (COURSE_KERNELS=torch)" if compiled.available() else "the torch path (no Numba)")
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads; discrete stages: {path}")
     rows = BENCHES[args.which].run(args)
     if args.json:
         with open(args.json, "w") as fh:

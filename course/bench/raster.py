@@ -13,7 +13,9 @@ S4     3             1,280       256²
 =====  ============  ==========  ========
 
 and reports the median time, triangles and pixels per second, with and without back-face culling, and the
-peak memory of one render (measured in a fresh process). ``--vs opengl`` renders the same scenes with
+peak memory of one render (measured in a fresh process). With the compiled kernels in force (``course.kernels``,
+the default on CPU tensors) it times the torch path too, side by side, and prints the kernels' cold start
+(compile in a first process, load from the cache in a second). ``--vs opengl`` renders the same scenes with
 OpenGL (moderngl on whatever driver EGL finds, Mesa's llvmpipe on a machine without a GPU) in the same run,
 reports the time ratio, and checks that the two agree on the visible face of every pixel.
 """
@@ -24,9 +26,11 @@ import sys
 
 import torch
 
+from .. import kernels
 from ..camera import Camera
 from ..models import icosphere
 from ..raster import rasterize
+from .kernels import cold_start_line
 from .timing import time_it, time_side_by_side
 
 __all__ = ["SCENES", "scene", "bench_raster", "format_table", "add_arguments", "run"]
@@ -46,13 +50,15 @@ def scene(name: str, dtype=torch.float32):
 
 
 def _peak_memory_mb(name: str, cull: bool) -> float:
-    """Peak resident memory of one render in a fresh process, above the resident memory just before it (MB).
+    """Peak resident memory of one render in a fresh process, above the resident memory just before it (MB):
+    the second render of the process, so loading the compiled kernels is not counted.
 
     Linux only: the peak (VmHWM) is reset through /proc/self/clear_refs before the render.
     """
     code = (
         "import torch; from course.bench.raster import scene; from course.raster import rasterize\n"
         f"m, c = scene({name!r})\n"
+        f"rasterize(m, c, cull_backfaces={cull})\n"                        # compiled kernels loaded first
         "kb = lambda key: int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith(key)))\n"
         "open('/proc/self/clear_refs', 'w').write('5'); base = kb('VmRSS:')\n"
         f"rasterize(m, c, cull_backfaces={cull})\n"
@@ -144,14 +150,25 @@ def bench_raster(names=("S1", "S2", "S3", "S4"), repeat: int = 7, vs_opengl: boo
                 "  Install it with `pip install moderngl` and Mesa's EGL driver (Debian: libegl1 libegl-mesa0 "
                 "libgl1-mesa-dri).")
     rows = []
+    twin = kernels.backend() == "numba" and kernels.available()             # also time the torch path
+
+    def on_torch(fn):
+        def run():
+            with kernels.using("torch"):
+                return fn()
+        return run
+
     for name in names:
         mesh, camera = scene(name)
         pixels = camera.width * camera.height
-        both = time_side_by_side([lambda: rasterize(mesh, camera), lambda: rasterize(mesh, camera,
-                                                                                   cull_backfaces=True)], repeat)
-        for cull, ms in zip((False, True), both):
+        fns = [lambda: rasterize(mesh, camera), lambda: rasterize(mesh, camera, cull_backfaces=True)]
+        times = time_side_by_side(fns + ([on_torch(f) for f in fns] if twin else []), repeat)
+        for k, cull in enumerate((False, True)):
+            ms = times[k]
             row = dict(scene=name, faces=mesh.num_faces, size=camera.width, cull=cull, ms=ms,
                        mtri_s=mesh.num_faces / ms / 1e3, mpix_s=pixels / ms / 1e3)
+            if twin:
+                row["torch_ms"] = times[2 + k]
             if memory:
                 row["peak_mb"] = _peak_memory_mb(name, cull)
             if gl is not None:
@@ -161,18 +178,25 @@ def bench_raster(names=("S1", "S2", "S3", "S4"), repeat: int = 7, vs_opengl: boo
                 row["agree"] = float((gl.face_ids() == ours).double().mean())
             rows.append(row)
     out(format_table(rows))
+    if twin:
+        out("median ms: rasterize with the compiled kernels (course.kernels); torch ms: the torch path "
+            "(COURSE_KERNELS=torch), side by side in the same run.")
+        cold_start_line(out)
     return rows
 
 
 def format_table(rows) -> str:
     gl = any("gl_ms" in r for r in rows)
+    twin = any("torch_ms" in r for r in rows)
     head = f"{'scene':<6}{'faces':>9}{'image':>7}{'cull':>6}{'median ms':>11}{'Mtri/s':>9}{'Mpix/s':>9}"
+    head += f"{'torch ms':>10}" if twin else ""
     head += f"{'peak MB':>9}" if any("peak_mb" in r for r in rows) else ""
     head += f"{'OpenGL ms':>11}{'ratio':>7}{'same face':>11}" if gl else ""
     lines = [head, "-" * len(head)]
     for r in rows:
         line = (f"{r['scene']:<6}{r['faces']:>9,}{str(r['size']) + '²':>7}{'yes' if r['cull'] else 'no':>6}"
                 f"{r['ms']:>11.1f}{r['mtri_s']:>9.2f}{r['mpix_s']:>9.1f}")
+        line += f"{r['torch_ms']:>10.1f}" if "torch_ms" in r else (" " * 10 if twin else "")
         line += f"{r['peak_mb']:>9.0f}" if "peak_mb" in r else ""
         if "gl_ms" in r:
             line += f"{r['gl_ms']:>11.2f}{r['ms'] / r['gl_ms']:>7.1f}{100 * r['agree']:>10.2f}%"

@@ -29,9 +29,11 @@ import math
 
 import torch
 
+from .. import kernels
 from ..camera import Camera
 from ..mesh import Mesh
 from ..raytrace import BVH, _camera_rays, intersect_triangles, raycast, visible
+from .kernels import cold_start_line
 from .raster import SCENES as RASTER_SCENES
 from .raster import scene as raster_scene
 from .timing import time_it, time_side_by_side
@@ -202,6 +204,20 @@ def measure(name: str, repeat: int = 3, scale: float = 0.25, n_incoherent: int =
         return r
 
     es = embree.build(mesh) if embree is not None else None
+    twin = kernels.backend() == "numba" and kernels.available()             # also time the torch path
+
+    def timed(fn, *others):
+        """Median ms of fn, the others (Embree) and, with the kernels in force, fn on the torch path, side by
+        side; returns (ms, [others' ms], torch ms or None)."""
+        fns = [fn, *others]
+        if twin:
+            def on_torch():
+                with kernels.using("torch"):
+                    return fn()
+            fns.append(on_torch)
+        ts = time_side_by_side(fns, repeat)
+        return ts[0], ts[1:1 + len(others)], ts[-1] if twin else None
+
     # build
     fns = [lambda: BVH(mesh)] + ([lambda: embree.build(mesh)] if embree else [])
     ts = time_side_by_side(fns, repeat)
@@ -212,10 +228,10 @@ def measure(name: str, repeat: int = 3, scale: float = 0.25, n_incoherent: int =
     face_bf = brute_force(o[pix], d[pix], tris64, t_min=t_lo[pix], t_max=t_hi[pix])
     brute_ms = time_it(lambda: brute_force(o[pix], d[pix], tris64, t_min=t_lo[pix], t_max=t_hi[pix]), 1,
                        warmup=0) / pix.numel()
-    fns = [lambda: raycast(mesh, cam, bvh=bvh)] + ([lambda: embree.trace(es, o, d)] if embree else [])
-    ts = time_side_by_side(fns, repeat)
-    row("primary", o.shape[0], ts[0], brute_rays=pix.numel(), brute_ms_per_ray=brute_ms,
-        agree=float((face_bvh == face_bf).double().mean()), embree_ms=ts[1] if embree else None)
+    ms, other, torch_ms = timed(lambda: raycast(mesh, cam, bvh=bvh), *([lambda: embree.trace(es, o, d)] if embree else []))
+    row("primary", o.shape[0], ms, brute_rays=pix.numel(), brute_ms_per_ray=brute_ms,
+        agree=float((face_bvh == face_bf).double().mean()), embree_ms=other[0] if embree else None,
+        torch_ms=torch_ms)
     # shadow rays: any hit, from the visible hit points to the light
     if pts.shape[0]:
         sd = light - pts
@@ -228,20 +244,21 @@ def measure(name: str, repeat: int = 3, scale: float = 0.25, n_incoherent: int =
                                                any_hit=True), 1, warmup=0) / sub.numel()
         e_o, e_d = pts + sd * s_lo[:, None], sd
         e_dist = s_hi - s_lo
-        fns = [lambda: visible(pts, light, bvh)] + (
-            [lambda: embree.trace(es, e_o, e_d, dists=e_dist, occluded=True)] if embree else [])
-        ts = time_side_by_side(fns, repeat)
-        row("shadow", pts.shape[0], ts[0], brute_rays=sub.numel(), brute_ms_per_ray=brute_ms,
-            agree=float((free == ~blocked_bf).double().mean()), embree_ms=ts[1] if embree else None)
+        ms, other, torch_ms = timed(lambda: visible(pts, light, bvh), *(
+            [lambda: embree.trace(es, e_o, e_d, dists=e_dist, occluded=True)] if embree else []))
+        row("shadow", pts.shape[0], ms, brute_rays=sub.numel(), brute_ms_per_ray=brute_ms,
+            agree=float((free == ~blocked_bf).double().mean()), embree_ms=other[0] if embree else None,
+            torch_ms=torch_ms)
     # incoherent rays: closest hit
     sub = _subset(inc_o.shape[0], n_brute)
     face_bvh = bvh.intersect(inc_o[sub], inc_d[sub]).face_id
     face_bf = brute_force(inc_o[sub], inc_d[sub], tris64)
     brute_ms = time_it(lambda: brute_force(inc_o[sub], inc_d[sub], tris64), 1, warmup=0) / sub.numel()
-    fns = [lambda: bvh.intersect(inc_o, inc_d)] + ([lambda: embree.trace(es, inc_o, inc_d)] if embree else [])
-    ts = time_side_by_side(fns, repeat)
-    row("incoherent", inc_o.shape[0], ts[0], brute_rays=sub.numel(), brute_ms_per_ray=brute_ms,
-        agree=float((face_bvh == face_bf).double().mean()), embree_ms=ts[1] if embree else None)
+    ms, other, torch_ms = timed(lambda: bvh.intersect(inc_o, inc_d),
+                                *([lambda: embree.trace(es, inc_o, inc_d)] if embree else []))
+    row("incoherent", inc_o.shape[0], ms, brute_rays=sub.numel(), brute_ms_per_ray=brute_ms,
+        agree=float((face_bvh == face_bf).double().mean()), embree_ms=other[0] if embree else None,
+        torch_ms=torch_ms)
     for r in rows:
         if r.get("brute_ms_per_ray") is not None:
             r["speedup"] = r["brute_ms_per_ray"] * r["rays"] / r["ms"]
@@ -252,8 +269,9 @@ def measure(name: str, repeat: int = 3, scale: float = 0.25, n_incoherent: int =
 
 def format_table(rows) -> str:
     emb = any(r.get("embree_ms") for r in rows)
+    twin = any(r.get("torch_ms") for r in rows)
     head = (f"{'scene':<7}{'faces':>9} {'rays':<11}{'count':>8}{'ms':>10}{'Mrays/s':>9}"
-            f"{'brute ms/ray':>14}{'speed-up':>10}{'agree':>8}")
+            + (f"{'torch ms':>10}" if twin else "") + f"{'brute ms/ray':>14}{'speed-up':>10}{'agree':>8}")
     head += f"{'Embree ms':>11}{'Mrays/s':>9}{'ours/Embree':>13}" if emb else ""
     lines = [head, "-" * len(head)]
     for r in rows:
@@ -261,7 +279,8 @@ def format_table(rows) -> str:
             v = r.get(key)
             return f"{v:>{width}{fmt}}" if v is not None else " " * (width - 1) + "-"
         line = (f"{r['scene']:<7}{r['faces']:>9,} {r['kind']:<11}{r['rays'] or '':>8}{r['ms']:>10.1f}"
-                + f("mrays_s", ".3g", 9) + f("brute_ms_per_ray", ".3f", 14) + f("speedup", ".0f", 10)
+                + f("mrays_s", ".3g", 9) + (f("torch_ms", ".1f", 10) if twin else "")
+                + f("brute_ms_per_ray", ".3f", 14) + f("speedup", ".0f", 10)
                 + (f"{100 * r['agree']:>7.1f}%" if r.get("agree") is not None else f"{'-':>8}"))
         if emb:
             e = r.get("embree_ms")
@@ -352,11 +371,16 @@ def bench_raytrace(names=SCENES, repeat: int = 3, scale: float = 0.25, n_incoher
         f"{brute_pairs:,} ray-triangle pairs), extrapolated per ray; 'agree': same face (or same visibility) "
         f"as the BVH on those rays.")
     out(format_table(rows))
+    if any(r.get("torch_ms") for r in rows):
+        out("ms: with the compiled kernels (course.kernels); torch ms: the torch path (COURSE_KERNELS=torch), "
+            "side by side in the same run.")
+        cold_start_line(out)
     if embree is not None:
         out("Embree: float32, EmbreeScene + TriangleMesh + first query (commit) for build; run(query='INTERSECT' "
-            "/ 'OCCLUDED'). Targets: S1 primary within 8x, S2 build within 3x.")
+            "/ 'OCCLUDED'). Targets: primary rays (full Fragments) within 3x on S1 and 4x on S2, shadow and "
+            "incoherent rays within 4x, build within 3x on S2.")
         for r in rows:
-            if r["scene"] == "S1" and r["kind"] == "primary" or r["scene"] == "S2" and r["kind"] == "build":
+            if r["scene"] in ("S1", "S2") and r.get("ratio"):
                 out(f"  {r['scene']} {r['kind']}: ours / Embree = {r['ratio']:.1f}")
     if plot:
         plot_scaling(rows, plot)

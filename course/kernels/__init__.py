@@ -11,8 +11,12 @@ it must agree with, face id for face id.
 
 * ``traverse.closest_hits``: a stack-based walk of the course's own BVH with the watertight test
   (twin of ``BVH._traverse`` and ``intersect._watertight``).
+* ``screen.screen_triangles``: stage 1 of ``rasterize``, face by face: near/far, back faces, orientation,
+  on screen or not (twin of ``raster._screen_triangles``; faces crossing the near plane are clipped in torch).
 * ``zbuffer.nearest_faces``: scan conversion of every screen triangle with the top-left rule and a float64
   depth test (twin of ``scan._spans`` and ``scan._zbuffer``).
+* ``surface.pixel_surface``: the per-pixel barycentrics and depth of ``raster._visible_surface``, where no
+  gradient is recorded (with a gradient, the torch code runs, so autograd sees every step).
 
 Only "which face" is compiled. Barycentrics, depth and everything after them are computed from the face ids
 by the same torch code as before, so every gradient is unchanged (the split nvdiffrast and PyTorch3D make).
@@ -96,10 +100,10 @@ def warm_up() -> dict:
     """Compile (or load from the cache) every kernel for float32 and float64; returns seconds per kernel."""
     if not _AVAILABLE:
         raise RuntimeError(_WHY)
-    from . import traverse, zbuffer
+    from . import screen, surface, traverse, zbuffer
     times = {}
-    for name, fn in (("traverse", traverse.warm_up), ("zbuffer", zbuffer.warm_up)):
+    for name, module in (("screen", screen), ("zbuffer", zbuffer), ("surface", surface), ("traverse", traverse)):
         start = time.perf_counter()
-        fn()
+        module.warm_up()
         times[name] = time.perf_counter() - start
     return times

@@ -13,8 +13,9 @@ the hit with the least t in [t_min, t_max], exact ties in t to the lower face id
 compute every candidate's t with the same operations in the same order (``_watertight`` below is
 ``intersect._watertight`` line for line, float32 rays in float32 with the float64 fallback for edge
 functions that round to zero), and both visit every leaf a ray's segment may meet: a box is skipped only
-when its entry lies beyond the closest hit, compared with ``<=`` so ties are kept, and the box test widens
-the exit by a few ulps as ``bvh._beam_box`` does. The order of the visits changes how much work is done,
+when its entry lies beyond the closest hit by more than a few ulps of the rays' dtype (a hit exactly on a
+box's face, found first through a neighbour with the same t, must not drop the box), and the box test widens
+the exit by as much, more than ``bvh._beam_box`` does. The order of the visits changes how much work is done,
 never the answer. With ``any_hit`` a ray stops at its first hit (shadow rays), which, as in torch, may be
 any of the faces it hits.
 """
@@ -28,6 +29,7 @@ import numpy as np
 __all__ = ["closest_hits", "warm_up"]
 
 _EPS64 = float(np.finfo(np.float64).eps)
+_EPS32 = float(np.finfo(np.float32).eps)
 BLOCK = 64                                                                  # rays per parallel task
 
 
@@ -46,22 +48,23 @@ def _ray_frame(d):
         kx, ky = ky, kx
     dz = d[kz]
     if dz == 0:
-        return -1, 0, 0, d[0], d[0], d[0]
+        return 0, 0, -1, d[0], d[0], d[0]
     return kx, ky, kz, d[kx] / dz, d[ky] / dz, np.float32(1.0) / dz     # 1 / dz in d's dtype
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _watertight(o, kx, ky, kz, sx, sy, sz, a, b, c, is32):
+def _watertight(o, kx, ky, kz, sx, sy, sz, a, b, c, s, is32):
     """Woop, Benthin and Wald's watertight test of one ray against one triangle, in the rays' dtype.
 
-    o: (3,) the ray's origin, and its frame from ``_ray_frame``; a, b, c: (3,) the triangle's vertices, all
-    float32 (``is32``) or all float64. Returns t (rounded to the rays' dtype, held in a float64; +inf on a
+    o: (3,) the ray's origin, and its frame from ``_ray_frame``; a, b, c: (F, 3) the triangles' corners and s
+    the one to test, all float32 (``is32``) or all float64. Returns t (rounded to the rays' dtype, held in a float64; +inf on a
     miss), whether it hit, and the barycentric weights U, V, W (float64, before division by their sum). The
     arithmetic is ``intersect._watertight``'s, operation by operation, so t is bit-identical to it.
     """
-    Ax, Ay, Az = a[kx] - o[kx], a[ky] - o[ky], a[kz] - o[kz]              # vertices relative to the origin
-    Bx, By, Bz = b[kx] - o[kx], b[ky] - o[ky], b[kz] - o[kz]
-    Cx, Cy, Cz = c[kx] - o[kx], c[ky] - o[ky], c[kz] - o[kz]
+    ox, oy, oz = o[kx], o[ky], o[kz]
+    Ax, Ay, Az = a[s, kx] - ox, a[s, ky] - oy, a[s, kz] - oz              # vertices relative to the origin
+    Bx, By, Bz = b[s, kx] - ox, b[s, ky] - oy, b[s, kz] - oz
+    Cx, Cy, Cz = c[s, kx] - ox, c[s, ky] - oy, c[s, kz] - oz
     ax, ay = Ax - sx * Az, Ay - sy * Az                                     # sheared, projected along z
     bx, by = Bx - sx * Bz, By - sy * Bz
     cx, cy = Cx - sx * Cz, Cy - sy * Cz
@@ -87,42 +90,47 @@ def _watertight(o, kx, ky, kz, sx, sy, sz, a, b, c, is32):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _slab(lo, hi, o, inv, entry, exit_):
-    """One axis of the slab test: the interval [entry, exit_] narrowed to where the ray lies between the
-    planes lo and hi (o, inv = 1 / d, float64). An axis along which the ray does not move (inv infinite)
-    constrains nothing, as in ``bvh._beam``."""
-    if inv > 0 and inv != math.inf:
-        return max(entry, (lo - o) * inv), min(exit_, (hi - o) * inv)
-    if inv < 0 and inv != -math.inf:
-        return max(entry, (hi - o) * inv), min(exit_, (lo - o) * inv)
-    return entry, exit_
+def _entry(boxes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, t_lo, t_hi, tol):
+    """Slab test of one ray against the box of ``node``: the distance at which the segment [t_lo, t_hi]
+    enters the box, or +inf when it misses it.
 
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _entry(lo, hi, node, ox, oy, oz, ix, iy, iz, t_lo, t_hi):
-    """Slab test of one ray against the box of ``node`` (lo, hi (M, 3) float64): the distance at which the
-    segment [t_lo, t_hi] enters the box, or +inf when it misses it. The exit is widened by 4 ulps, as in
-    ``bvh._beam_box``, so rounding never drops a box the ray grazes."""
-    entry, exit_ = _slab(lo[node, 0], hi[node, 0], ox, ix, t_lo, math.inf)
-    entry, exit_ = _slab(lo[node, 1], hi[node, 1], oy, iy, entry, exit_)
-    entry, exit_ = _slab(lo[node, 2], hi[node, 2], oz, iz, entry, exit_)
-    exit_ = min(exit_ + abs(exit_) * (4 * _EPS64), t_hi)
+    boxes: (M, 2, 3) float64 min and max corners. Along axis x the ray crosses the box's planes at
+    ``(plane - ox) * ix`` (ix = 1 / d_x), the near plane first: nx = 0 (the min corner) when ix > 0, 1 when
+    ix < 0. An axis along which the ray does not move (d_x = 0) constrains nothing, as in ``bvh._beam``: its
+    ix is set to 0 and its cap cx to -inf, so the entry there is min(0, -inf) = -inf and the exit +inf (no
+    branch per box). The exit is widened by ``tol`` (relative) so that rounding never drops a box the ray
+    grazes: a hit's t carries the rounding of the rays' dtype."""
+    entry = max(max(max(t_lo, min((boxes[node, nx, 0] - ox) * ix, cx)), min((boxes[node, ny, 1] - oy) * iy, cy)),
+                min((boxes[node, nz, 2] - oz) * iz, cz))
+    exit_ = min(min(max((boxes[node, 1 - nx, 0] - ox) * ix, -cx), max((boxes[node, 1 - ny, 1] - oy) * iy, -cy)),
+                max((boxes[node, 1 - nz, 2] - oz) * iz, -cz))
+    exit_ = min(exit_ + abs(exit_) * tol, t_hi + abs(t_hi) * tol)
     return entry if entry <= exit_ else math.inf
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _axis(d):
+    """Per ray and axis: 1 / d (0 where d = 0, or where 1 / d overflows), which corner is near, and the cap."""
+    inv = 1.0 / np.float64(d)
+    if math.isinf(inv):
+        return 0.0, 0, -math.inf
+    return inv, (0 if inv > 0 else 1), math.inf
+
+
 @numba.njit(cache=True, error_model="numpy", parallel=True)
-def closest_hits(o, d, t_lo, t_hi, lo, hi, left, first, count, order, v0, v1, v2, any_hit, stack_size,
+def closest_hits(o, d, t_lo, t_hi, boxes, left, first, count, order, v0, v1, v2, any_hit, stack_size,
                  face, t_out, bary):
     """The face each ray hits first (or any face it hits, ``any_hit``), -1 on a miss.
 
     o, d: (N, 3) rays; t_lo, t_hi: (N,) their segments (all in the rays' dtype). The BVH (``bvh.BVH``):
-    lo, hi (M, 3) float64 box corners; left (M,) first child (-1: leaf); first, count (M,) a leaf's slots;
-    order (F,) the face id of each slot; v0, v1, v2 (F, 3) the triangles in slot order, in the rays' dtype.
-    stack_size: more than the tree's depth. Writes face (N,) int64, t (N,) and bary (N, 3) (the rays'
-    dtype; +inf and 0 on a miss), as ``BVH.intersect`` returns them.
+    boxes (M, 2, 3) float64 min and max corners; left (M,) first child (-1: leaf; the second child is
+    left + 1); first, count (M,) a leaf's slots; order (F,) the face id of each slot; v0, v1, v2 (F, 3) the
+    triangles in slot order, in the rays' dtype. stack_size: more than the tree's depth. Writes face (N,)
+    int64, t (N,) and bary (N, 3) (the rays' dtype; +inf and 0 on a miss), as ``BVH.intersect`` returns them.
     """
     N = o.shape[0]
     is32 = o.itemsize == 4
+    tol = 16 * (_EPS32 if is32 else _EPS64)                                  # a few ulps of a hit's t, relative
     n_blocks = (N + BLOCK - 1) // BLOCK
     for blk in numba.prange(n_blocks):
         stack = np.empty(stack_size, np.int64)                               # nodes still to visit
@@ -135,43 +143,53 @@ def closest_hits(o, d, t_lo, t_hi, lo, hi, left, first, count, order, v0, v1, v2
                 continue
             orig = o[r]
             ox, oy, oz = np.float64(orig[0]), np.float64(orig[1]), np.float64(orig[2])
-            ix, iy, iz = 1.0 / np.float64(d[r, 0]), 1.0 / np.float64(d[r, 1]), 1.0 / np.float64(d[r, 2])
+            ix, nx, cx = _axis(d[r, 0])
+            iy, ny, cy = _axis(d[r, 1])
+            iz, nz, cz = _axis(d[r, 2])
             lo_r, hi_r = np.float64(t_lo[r]), np.float64(t_hi[r])
             best = hi_r                                                      # the closest hit so far
             best_face = -1
             bu, bv, bw = 0.0, 0.0, 0.0
-            e = _entry(lo, hi, 0, ox, oy, oz, ix, iy, iz, lo_r, hi_r)
-            if e == math.inf:
+            if _entry(boxes, 0, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, lo_r, hi_r, tol) == math.inf:
                 continue
-            stack[0], enter[0] = 0, e
-            top = 1
-            while top > 0:
-                top -= 1
-                node = stack[top]
-                if enter[top] > best:                                        # nothing closer in there
-                    continue
+            node, top = 0, 0
+            while True:
                 if count[node] > 0:                                          # a leaf: its triangles
                     for s in range(first[node], first[node] + count[node]):
-                        t, hit, U, V, W = _watertight(orig, kx, ky, kz, sx, sy, sz, v0[s], v1[s], v2[s], is32)
+                        t, hit, U, V, W = _watertight(orig, kx, ky, kz, sx, sy, sz, v0, v1, v2, s, is32)
                         if hit and t >= lo_r and t <= best:
                             f = order[s]
                             if t < best or best_face < 0 or f < best_face:
                                 best, best_face, bu, bv, bw = t, f, U, V, W
                     if any_hit and best_face >= 0:
                         break
-                else:                                                        # internal: both children
+                    node = -1
+                else:                                                        # internal: the children it meets
                     c = left[node]
-                    e1 = _entry(lo, hi, c, ox, oy, oz, ix, iy, iz, lo_r, hi_r)
-                    e2 = _entry(lo, hi, c + 1, ox, oy, oz, ix, iy, iz, lo_r, hi_r)
-                    near, far, e_near, e_far = c, c + 1, e1, e2
-                    if e2 < e1:
-                        near, far, e_near, e_far = c + 1, c, e2, e1
-                    if e_far <= best:
-                        stack[top], enter[top] = far, e_far
+                    e1 = _entry(boxes, c, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, lo_r, hi_r, tol)
+                    e2 = _entry(boxes, c + 1, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, lo_r, hi_r, tol)
+                    bound = best + abs(best) * tol                           # nothing closer beyond this
+                    ok1, ok2 = e1 <= bound, e2 <= bound
+                    if ok1 and ok2:                                          # both: the nearer next, the other later
+                        if e2 < e1:
+                            stack[top], enter[top], node = c, e1, c + 1
+                        else:
+                            stack[top], enter[top], node = c + 1, e2, c
                         top += 1
-                    if e_near <= best:
-                        stack[top], enter[top] = near, e_near
-                        top += 1
+                    elif ok1:
+                        node = c
+                    elif ok2:
+                        node = c + 1
+                    else:
+                        node = -1
+                if node < 0:                                                 # pop a node that may hold a closer hit
+                    while top > 0:
+                        top -= 1
+                        if enter[top] <= best + abs(best) * tol:
+                            node = stack[top]
+                            break
+                    if node < 0:
+                        break
             if best_face >= 0:
                 det = bu + bv + bw
                 face[r], t_out[r] = best_face, best
@@ -180,12 +198,11 @@ def closest_hits(o, d, t_lo, t_hi, lo, hi, left, first, count, order, v0, v1, v2
 
 def warm_up():
     """Compile ``closest_hits`` for float32 and float64 rays (or load it from the cache)."""
-    lo = np.array([[0.0, 0.0, 0.0]])
-    hi = np.array([[1.0, 1.0, 0.0]])
+    boxes = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]])
     idx = np.zeros(1, np.int64)
     for dt in (np.float32, np.float64):
         tri = [np.array([[0, 0, 0]], dt), np.array([[1, 0, 0]], dt), np.array([[0, 1, 0]], dt)]
         o, d = np.array([[0.2, 0.2, -1]], dt), np.array([[0, 0, 1]], dt)
         t0, t1 = np.zeros(1, dt), np.full(1, np.inf, dt)
-        closest_hits(o, d, t0, t1, lo, hi, np.full(1, -1, np.int64), idx, np.ones(1, np.int64), idx, *tri,
+        closest_hits(o, d, t0, t1, boxes, np.full(1, -1, np.int64), idx, np.ones(1, np.int64), idx, *tri,
                      False, 4, np.empty(1, np.int64), np.empty(1, dt), np.empty((1, 3), dt))

@@ -73,13 +73,23 @@ def _span(x, y, row_y, width):
     return first, last
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _plane(xy, q, t):
+    """The affine function q(px, py) = q0 + qx px + qy py of triangle t (``scan._plane``, operation by operation)."""
+    e1x, e1y = xy[t, 1, 0] - xy[t, 0, 0], xy[t, 1, 1] - xy[t, 0, 1]
+    e2x, e2y = xy[t, 2, 0] - xy[t, 0, 0], xy[t, 2, 1] - xy[t, 0, 1]
+    d1, d2 = q[t, 1] - q[t, 0], q[t, 2] - q[t, 0]
+    det = e1x * e2y - e1y * e2x                                             # twice the area, > 0
+    qx, qy = (d1 * e2y - d2 * e1y) / det, (d2 * e1x - d1 * e2x) / det
+    return q[t, 0] - qx * xy[t, 0, 0] - qy * xy[t, 0, 1], qx, qy
+
+
 @numba.njit(cache=True, error_model="numpy")
-def nearest_faces(xy, q0, qx, qy, face, width, height, orthographic, far, check_far, face_map, depth_map,
-                  notes):
+def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face_map, depth_map, notes):
     """The z-buffer: the nearest face at every pixel centre, and the pixels to decide by the exact tie rule.
 
-    xy: (T, 3, 2) float64 screen triangles (positive area); q0, qx, qy: (T,) their screen-affine
-    q = q0 + qx x + qy y (``scan._plane``); face: (T,) int64 face ids; far: the far plane, applied to the
+    xy: (T, 3, 2) float64 screen triangles (positive area); q: (T, 3) the screen-affine q at their corners
+    (1/z, or z for an orthographic camera); face: (T,) int64 face ids; far: the far plane, applied to the
     float32 depth as ``scan._zbuffer`` does when ``check_far``. Fills face_map (H*W,) int64 (-1: no face)
     and depth_map (H*W,) float64 (start: +inf). notes (K, 2) int64: (pixel, face) pairs whose depths came
     within NOTE_RTOL of the pixel's nearest at the time. Returns the number of notes (more than K: the
@@ -96,15 +106,16 @@ def nearest_faces(xy, q0, qx, qy, face, width, height, orthographic, far, check_
         y_min, y_max = min(ys[0], ys[1], ys[2]), max(ys[0], ys[1], ys[2])
         r0 = int(max(math.ceil(y_min - 0.5), 0.0))                           # rows whose centres it reaches
         r1 = int(min(math.floor(y_max - 0.5), height - 1.0))
-        a, b, c, f = q0[t], qx[t], qy[t], face[t]
+        a, b, c = _plane(xy, q, t)
+        f = face[t]
         for row in range(r0, r1 + 1):
             row_y = row + 0.5
             first, last = _span(xs, ys, row_y, width)
             for col in range(int(first), int(last) + 1):
-                q = a + b * (col + 0.5) + c * row_y                         # scan._depth_at's order
-                depth = q if orthographic else 1.0 / q
+                qp = a + b * (col + 0.5) + c * row_y                        # scan._depth_at's order
+                depth = qp if orthographic else 1.0 / qp
                 if check_far:
-                    q32 = np.float32(q)
+                    q32 = np.float32(qp)
                     d32 = q32 if orthographic else np.float32(1.0) / q32
                     if not d32 <= far32:
                         continue
@@ -123,7 +134,6 @@ def nearest_faces(xy, q0, qx, qy, face, width, height, orthographic, far, check_
 def warm_up():
     """Compile ``nearest_faces`` (or load it from the cache)."""
     xy = np.array([[[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]]])
-    one = np.ones(1)
     for ortho in (False, True):
-        nearest_faces(xy, one, 0 * one, 0 * one, np.zeros(1, np.int64), 4, 4, ortho, 10.0, True,
+        nearest_faces(xy, np.ones((1, 3)), np.zeros(1, np.int64), 4, 4, ortho, 10.0, True,
                       np.full(16, -1, np.int64), np.full(16, np.inf), np.empty((8, 2), np.int64))
