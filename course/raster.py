@@ -435,11 +435,11 @@ def _kernel_surface(face_map, verts, faces, camera, H, W):
     numbers, bit for bit."""
     from .kernels.surface import faces_seen, pixel_surface
     dtype = torch.promote_types(verts.dtype, camera.dtype)
-    bary = torch.zeros(H * W, 3, dtype=dtype)
-    depth = torch.full((H * W,), float("inf"), dtype=dtype)
     fm = face_map.contiguous().numpy()
     row, n = faces_seen(fm, faces.shape[0])
     if n:
+        bary = torch.empty(H * W, 3, dtype=dtype)                          # every pixel written below
+        depth = torch.empty(H * W, dtype=dtype)
         used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
         coef, z = _kernel_face_table(used, verts, faces, camera)
         K = camera.K.to(dtype)
@@ -448,6 +448,9 @@ def _kernel_surface(face_map, verts, faces, camera, H, W):
         consts = torch.tensor([1.0, torch.finfo(dtype).tiny ** 0.5], dtype=dtype)
         pixel_surface(fm, row, *(x.detach().contiguous().numpy() for x in (coef, z, xs, ys, consts)),
                       bary.numpy(), depth.numpy())
+    else:
+        bary = torch.zeros(H * W, 3, dtype=dtype)
+        depth = torch.full((H * W,), float("inf"), dtype=dtype)
     return bary.view(H, W, 3), depth.view(H, W)
 
 

@@ -367,9 +367,9 @@ def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
     capacity = max(1024, 2 * H * W)
     while True:
         faces = torch.full((H * W,), -1, dtype=torch.int64)
-        depth = torch.full((H * W,), float("inf"), dtype=torch.float64)
+        keys = torch.full((H * W,), float("inf"), dtype=torch.float64)
         notes = torch.empty((capacity, 2), dtype=torch.int64)
-        n = nearest_faces(*args, faces.numpy(), depth.numpy(), notes.numpy())
+        n = nearest_faces(*args, faces.numpy(), keys.numpy(), notes.numpy())
         if n <= capacity:
             break
         capacity = n                                                        # rare: coplanar faces everywhere

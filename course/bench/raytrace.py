@@ -311,15 +311,16 @@ def plot_scaling(rows, path=None):
 
     rows: ``measure`` / ``bench_raytrace`` rows (dicts with ``scene``, ``faces``, ``kind``, ``rays``, ``ms``, and
     where measured ``brute_ms_per_ray`` and ``embree_ms``). Draws, for the kinds in ``SCALING_KINDS`` (primary,
-    incoherent): "brute force, KIND" (dashed, ``brute_ms_per_ray``), "BVH, KIND" (solid, ``ms / rays``) and,
-    when the rows have Embree times, "Embree, KIND" (dotted), each point labelled with its scene; and a grey
+    incoherent): "brute force, KIND" (dashed, ``brute_ms_per_ray``), "BVH, KIND" (solid, ``ms / rays``: the
+    compiled kernels where they ran) and, when the rows have them, "Embree, KIND" (dotted) and "BVH, torch
+    path, KIND" (dash-dot, ``torch_ms``), each point labelled with its scene; and a grey
     guide "∝ faces" through the first brute-force point, the slope brute force should follow. path: where to
     save it (None: don't). Returns the matplotlib figure. Raises ValueError when no row has rays to plot.
     """
     import matplotlib.pyplot as plt
     rows = list(rows)
     methods = (("brute force", "brute_ms_per_ray", "--", "s"), ("BVH", "ms", "-", "o"),
-               ("Embree", "embree_ms", ":", "^"))
+               ("Embree", "embree_ms", ":", "^"), ("BVH, torch path", "torch_ms", "-.", "x"))
     lines = []                                                              # (label, points, style, marker, colour)
     for m, (method, key, style, marker) in enumerate(methods):
         for k, kind in enumerate(SCALING_KINDS):

@@ -77,13 +77,14 @@ def faces_seen(face_map, n_faces):
 def pixel_surface(face_map, row_of_face, coef, z, xs, ys, consts, bary, depth):
     """face_map (H*W,) int64 (-1: no face); row_of_face (F,) the row of each face in coef (U, 9) and
     z (U, 3); xs (W,), ys (H,): the pixel centres' offsets x - cx, y - cy; consts (2,): 1 and the guard
-    ``tiny`` for edge-on faces; all floats in one dtype. Writes bary (H*W, 3) and depth (H*W,) at covered
-    pixels (the others are left as they are: 0 and +inf)."""
+    ``tiny`` for edge-on faces; all floats in one dtype. Writes bary (H*W, 3) and depth (H*W,): 0 and +inf
+    where no face is visible."""
     W = xs.shape[0]
     one, tiny = consts[0], consts[1]
     for p in range(face_map.shape[0]):
         f = face_map[p]
         if f < 0:
+            bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
             continue
         r = row_of_face[f]
         qx, qy = xs[p % W], ys[p // W]

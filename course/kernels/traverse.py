@@ -169,7 +169,7 @@ def closest_hits(o, d, t_lo, t_hi, boxes, left, first, count, order, v0, v1, v2,
                     e1 = _entry(boxes, c, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, lo_r, hi_r, tol)
                     e2 = _entry(boxes, c + 1, ox, oy, oz, ix, iy, iz, nx, ny, nz, cx, cy, cz, lo_r, hi_r, tol)
                     bound = best + abs(best) * tol                           # nothing closer beyond this
-                    ok1, ok2 = e1 <= bound, e2 <= bound
+                    ok1, ok2 = e1 < math.inf and e1 <= bound, e2 < math.inf and e2 <= bound   # inf: missed
                     if ok1 and ok2:                                          # both: the nearer next, the other later
                         if e2 < e1:
                             stack[top], enter[top], node = c, e1, c + 1

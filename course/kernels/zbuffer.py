@@ -16,7 +16,8 @@ shared by two triangles still gives one to each side. Visibility: ``scan._zbuffe
 in float64, depths within ``scan.TIE_RTOL`` (relative) a tie that goes to the lower face id; here the float64
 depths are compared directly, and every pixel where two depths come within ``NOTE_RTOL`` (far above
 ``TIE_RTOL``) of each other is noted, with both faces, for ``scan._NearTies.resolve`` to decide exactly as
-the torch path does. Without a near-tie the nearer face is nearer by more than a rounding error, and both
+the torch path does. (The loop compares q = 1/z rather than z, a division less per fragment: the order is
+the same wherever the two are not within rounding of each other, and there they are noted.) Without a near-tie the nearer face is nearer by more than a rounding error, and both
 paths pick it.
 """
 from __future__ import annotations
@@ -85,15 +86,18 @@ def _plane(xy, q, t):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face_map, depth_map, notes):
+def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face_map, key_map, notes):
     """The z-buffer: the nearest face at every pixel centre, and the pixels to decide by the exact tie rule.
 
     xy: (T, 3, 2) float64 screen triangles (positive area); q: (T, 3) the screen-affine q at their corners
     (1/z, or z for an orthographic camera); face: (T,) int64 face ids; far: the far plane, applied to the
     float32 depth as ``scan._zbuffer`` does when ``check_far``. Fills face_map (H*W,) int64 (-1: no face)
-    and depth_map (H*W,) float64 (start: +inf). notes (K, 2) int64: (pixel, face) pairs whose depths came
-    within NOTE_RTOL of the pixel's nearest at the time. Returns the number of notes (more than K: the
-    buffer was too small and the call must be repeated with a larger one).
+    and key_map (H*W,) float64 (start: +inf), the nearest fragment's key: -q = -1/z for a perspective
+    camera (larger q is nearer, and comparing q saves a division per fragment; 1/q rounds monotonically, so
+    the order is depth's except between q's within a rounding error, which are near-ties), z itself for an
+    orthographic one. notes (K, 2) int64: (pixel, face) pairs whose keys came within NOTE_RTOL (relative) of
+    the pixel's nearest at the time. Returns the number of notes (more than K: the buffer was too small and
+    the call must be repeated with a larger one).
     """
     n_notes = 0
     cap = notes.shape[0]
@@ -113,21 +117,21 @@ def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face
             first, last = _span(xs, ys, row_y, width)
             for col in range(int(first), int(last) + 1):
                 qp = a + b * (col + 0.5) + c * row_y                        # scan._depth_at's order
-                depth = qp if orthographic else 1.0 / qp
                 if check_far:
                     q32 = np.float32(qp)
                     d32 = q32 if orthographic else np.float32(1.0) / q32
                     if not d32 <= far32:
                         continue
+                key = qp if orthographic else -qp                           # smaller: nearer
                 p = row * width + col
-                best = depth_map[p]
-                if best != math.inf and abs(depth - best) <= NOTE_RTOL * abs(best):
+                best = key_map[p]
+                if best != math.inf and abs(key - best) <= NOTE_RTOL * abs(best):
                     if n_notes + 2 <= cap:                                  # a near-tie: both faces noted
                         notes[n_notes, 0], notes[n_notes, 1] = p, f
                         notes[n_notes + 1, 0], notes[n_notes + 1, 1] = p, face_map[p]
                     n_notes += 2
-                if depth < best or (depth == best and f < face_map[p]):
-                    depth_map[p], face_map[p] = depth, f
+                if key < best or (key == best and f < face_map[p]):
+                    key_map[p], face_map[p] = key, f
     return n_notes
 
 
