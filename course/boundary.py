@@ -33,6 +33,7 @@ import math
 import numpy as np
 import torch
 
+from . import kernels
 from .discontinuities import _intersecting_faces
 from .coverage import _region_chunks
 from .coverage_affine import _Field, polygon_centroids
@@ -543,6 +544,14 @@ def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1
         if idx.numel() == 0 or st.face.numel() == 0:
             return out
         px_all, py_all = pts[idx, 0].double().contiguous(), pts[idx, 1].double().contiguous()
+        if kernels.active(px_all, st.xy):                                   # the compiled twin
+            from .kernels.points import visible_at
+            found = torch.empty(idx.numel(), dtype=torch.int64)
+            visible_at(st.xy.contiguous().numpy(), st.q.contiguous().numpy(), st.face.contiguous().numpy(),
+                       px_all.numpy(), py_all.numpy(), W, H, bool(camera.orthographic), float(camera.far),
+                       found.numpy())
+            out[idx] = found
+            return out
         cells = 1                                                           # cells per pixel side
         while True:                                                         # the triangles of each point's cell
             cw, ch = W * cells, H * cells

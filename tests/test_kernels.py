@@ -271,3 +271,35 @@ def test_bad_input_is_refused_before_any_kernel_runs():
         bvh = BVH(SimpleNamespace(verts=verts, faces=torch.tensor([[0, 1, 2]])))
         with pytest.raises(ValueError, match="finite"):
             bvh.intersect(torch.full((1, 3), float("nan")), torch.ones(1, 3))
+
+
+# ------------------------------------------------------------------------ the boundary term's z-buffer queries
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), ortho=st.booleans())
+def test_visible_at_points_matches_torch(seed, ortho):
+    """boundary._visible_at at random points, points on edges and vertices, points off the image."""
+    from course.boundary import _visible_at
+    mesh = soup(seed)
+    g = torch.Generator().manual_seed(seed)
+    view = dict(ortho_height=3.0) if ortho else dict(fov_y=50.0)
+    cam = Camera.look_at((0.4, 0.7, 3.3), (0.0, 0.0, 0.0), width=37, height=29, dtype=torch.float64, **view)
+    xy, _ = cam.project(mesh.verts)
+    pts = torch.cat([torch.rand(3000, 2, generator=g, dtype=torch.float64) * torch.tensor([45.0, 35.0]) - 4,
+                     xy, (xy[mesh.faces[:, 0]] + xy[mesh.faces[:, 1]]) / 2])        # vertices, edge midpoints
+    for cull in (False, True):
+        a, b = both(lambda: _visible_at(mesh, cam, pts, cull_backfaces=cull))
+        assert torch.equal(a, b)
+        assert (a >= 0).any() and (a < 0).any()
+
+
+@pytest.mark.parametrize("method", ["reynolds", "edge_sampling"])
+def test_boundary_gradients_match_torch(method):
+    from course.bench.gradients import make_scene, weights_for
+    from course.visibility import image_gradient
+    for name in ("spheres", "S4-64"):
+        sc = make_scene(name)
+        w = weights_for(sc, "random")
+        a, b = both(lambda: image_gradient(sc["mesh"], sc["camera"], sc["colors"], w, method=method,
+                                           model=sc["model"], background=sc["background"]))
+        assert torch.equal(a, b) and a.abs().sum() > 0

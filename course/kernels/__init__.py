@@ -17,6 +17,8 @@ it must agree with, face id for face id.
   depth test (twin of ``scan._spans`` and ``scan._zbuffer``).
 * ``surface.pixel_surface``: the per-pixel barycentrics and depth of ``raster._visible_surface``, where no
   gradient is recorded (with a gradient, the torch code runs, so autograd sees every step).
+* ``points.visible_at``: the z-buffer asked at arbitrary points, for the boundary term of visibility
+  gradients (twin of ``boundary._visible_at``).
 
 Only "which face" is compiled. Barycentrics, depth and everything after them are computed from the face ids
 by the same torch code as before, so every gradient is unchanged (the split nvdiffrast and PyTorch3D make).
@@ -100,9 +102,10 @@ def warm_up() -> dict:
     """Compile (or load from the cache) every kernel for float32 and float64; returns seconds per kernel."""
     if not _AVAILABLE:
         raise RuntimeError(_WHY)
-    from . import screen, surface, traverse, zbuffer
+    from . import points, screen, surface, traverse, zbuffer
     times = {}
-    for name, module in (("screen", screen), ("zbuffer", zbuffer), ("surface", surface), ("traverse", traverse)):
+    for name, module in (("screen", screen), ("zbuffer", zbuffer), ("surface", surface), ("traverse", traverse),
+                         ("points", points)):
         start = time.perf_counter()
         module.warm_up()
         times[name] = time.perf_counter() - start
