@@ -17,7 +17,9 @@ in float64, depths within ``scan.TIE_RTOL`` (relative) a tie that goes to the lo
 depths are compared directly, and every pixel where two depths come within ``NOTE_RTOL`` (far above
 ``TIE_RTOL``) of each other is noted, with both faces, for ``scan._NearTies.resolve`` to decide exactly as
 the torch path does. (The loop compares q = 1/z rather than z, a division less per fragment: the order is
-the same wherever the two are not within rounding of each other, and there they are noted.) Without a near-tie the nearer face is nearer by more than a rounding error, and both
+the same wherever the two are not within rounding of each other, and there they are noted. Along a span q
+is stepped by qx from pixel to pixel, a few rounding errors from evaluating the plane at each centre, far
+below NOTE_RTOL: the noted pairs are decided with the plane evaluated exactly as in torch.) Without a near-tie the nearer face is nearer by more than a rounding error, and both
 paths pick it.
 """
 from __future__ import annotations
@@ -29,7 +31,7 @@ import numpy as np
 
 __all__ = ["nearest_faces", "warm_up", "NOTE_RTOL"]
 
-NOTE_RTOL = 1e-9                # depths this close (relative) are noted for the exact tie rule
+NOTE_RTOL = 1e-7                # keys this close (relative) are noted for the exact tie rule
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -115,14 +117,16 @@ def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face
         for row in range(r0, r1 + 1):
             row_y = row + 0.5
             first, last = _span(xs, ys, row_y, width)
-            for col in range(int(first), int(last) + 1):
-                qp = a + b * (col + 0.5) + c * row_y                        # scan._depth_at's order
+            qp = a + b * (int(first) + 0.5) + c * row_y                     # q at the span's first centre,
+            for col in range(int(first), int(last) + 1):                    # then one step of qx per pixel
+                q_here = qp
+                qp += b
                 if check_far:
-                    q32 = np.float32(qp)
+                    q32 = np.float32(q_here)
                     d32 = q32 if orthographic else np.float32(1.0) / q32
                     if not d32 <= far32:
                         continue
-                key = qp if orthographic else -qp                           # smaller: nearer
+                key = q_here if orthographic else -q_here                   # smaller: nearer
                 p = row * width + col
                 best = key_map[p]
                 if best != math.inf and abs(key - best) <= NOTE_RTOL * abs(best):
