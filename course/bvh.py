@@ -37,6 +37,11 @@ ray or per node visit:
 Rays that are not coherent (random directions) take the per-ray frontier instead (``_one_by_one``): (ray,
 node) pairs level by level, leaves tested as soon as they are reached, so a hit found high in the tree
 prunes the rest. Rays are processed in chunks so memory stays bounded.
+
+**The compiled twin.** All of the above is the data-parallel way, the one CUDA tensors take. On CPU tensors
+``BVH.intersect`` hands the same tree to ``course.kernels.traverse.closest_hits``, the textbook loop (one ray,
+one stack, nearer child first), compiled by Numba: the same face, t and barycentrics for every ray, several
+times faster (``python -m course bench raytrace``). ``course.kernels.using("torch")`` runs the code above.
 """
 from __future__ import annotations
 

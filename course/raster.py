@@ -30,6 +30,11 @@ lecture's building blocks.
 
 Triangles crossing the near plane are clipped in camera space (not dropped), triangles behind the camera
 never appear, and the far plane clips per pixel. Work is chunked so memory stays bounded.
+
+**Compiled twins.** On CPU tensors stages 1 and 2 run as compiled loops (``course.kernels``: ``screen``,
+``zbuffer``), and so does stage 3 where no gradient is recorded (``surface``); each gives the numbers of the
+torch code here, bit for bit, which CUDA tensors and ``course.kernels.using("torch")`` run. Wherever a
+gradient is recorded, stage 3 is the torch code, so autograd sees every step.
 """
 from __future__ import annotations
 

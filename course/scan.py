@@ -19,6 +19,10 @@ Stage 2 of ``rasterize`` (lecture 03; sub-pixel samples for lecture 05), on tria
   (relative, ``TIE_RTOL``: float64 rounding, coplanar faces) are a tie, which goes to the lower face id.
 
 Work is chunked so memory stays bounded (``CHUNK``).
+
+On CPU tensors ``_zbuffer`` hands the triangles to its compiled twin, ``course.kernels.zbuffer.nearest_faces``
+(one triangle, its rows, its pixels; the same spans and the same faces, bit for bit); the code here is the
+data-parallel version, the one CUDA tensors take and ``course.kernels.using("torch")`` selects.
 """
 from __future__ import annotations
 

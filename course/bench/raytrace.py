@@ -326,7 +326,8 @@ def plot_scaling(rows, path=None):
         for k, kind in enumerate(SCALING_KINDS):
             pts = _us_per_ray(rows, kind, key)
             if pts:
-                lines.append((f"{method}, {kind}", pts, style, marker, f"C{2 * m + k}"))
+                colour = 2 * m + k
+                lines.append((f"{method}, {kind}", pts, style, marker, f"C{colour + (colour >= 7)}"))   # C7: grey
     if not lines:
         raise ValueError("plot_scaling: no primary or incoherent rows with rays and times to plot "
                          "(expected the rows of measure() / bench_raytrace())")
