@@ -15,6 +15,9 @@ from course.models import icosphere, teapot
 from course.raster import pixel_triangle_pairs, rasterize
 from course.render import frame_camera
 
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
+
 
 def ortho_camera(W, H, dtype=torch.float64):
     """Orthographic camera looking down +z: world (x, y) = pixel (x, y), depth = world z."""

@@ -303,3 +303,16 @@ def test_boundary_gradients_match_torch(method):
         a, b = both(lambda: image_gradient(sc["mesh"], sc["camera"], sc["colors"], w, method=method,
                                            model=sc["model"], background=sc["background"]))
         assert torch.equal(a, b) and a.abs().sum() > 0
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_sub_pixel_samples_match_torch(dtype):
+    """rasterize(samples=..., pixels=...): stage 1 compiled, the sample z-buffer after it; the same fragments."""
+    mesh = teapot(3, dtype=dtype)
+    g = torch.Generator().manual_seed(0)
+    offsets = torch.rand(5, 2, generator=g, dtype=torch.float64)
+    for cam in cameras(dtype).values():
+        for kw in (dict(samples=offsets), dict(samples=offsets, pixels=torch.arange(0, 48 * 40, 7)),
+                   dict(pixels=torch.rand(40, 48, generator=g) > 0.5)):
+            a, b = both(lambda: rasterize(mesh, cam, cull_backfaces=True, **kw))
+            assert_same_fragments(a, b)

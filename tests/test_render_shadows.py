@@ -9,6 +9,9 @@ from course.models import cube, plane
 from course.render import RenderSettings, Scene, render
 from course.shading import AmbientLight, DirectionalLight, PointLight
 
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
+
 F64 = torch.float64
 
 

@@ -15,6 +15,9 @@ from course.camera import Camera
 from course.shadows import (CUBE_FACES, ShadowMap, SpotLight, area_light_samples, area_shadow_factor, biased_depth,
                             biased_lit, light_camera, light_space, pcf, shadow_factor, shadow_map)
 
+# every test runs on the compiled kernels and on the torch path (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("both_backends")
+
 UP = (0.0, 1.0, 0.0)
 
 
