@@ -243,15 +243,16 @@ class BVH:
         N = o.shape[0]
         t_lo = _per_ray(t_min, N, o, "t_min")
         t_hi = _per_ray(t_max, N, o, "t_max")
+        if kernels.active(o) and self.num_nodes and N:                      # the compiled twin: one loop per ray
+            face, t, bary = kernels.buffer(N, torch.int64), kernels.buffer(N, dtype), kernels.buffer((N, 3), dtype)
+            self._kernel_traverse(o, d, t_lo, t_hi, self._corners(dtype), any_hit, face, t, bary)
+            return Hits(face, t, bary)                                      # (every entry written)
         face = torch.full((N,), -1, dtype=torch.int64, device=self.device)
         t = torch.full((N,), math.inf, dtype=dtype, device=self.device)
         bary = torch.zeros((N, 3), dtype=dtype, device=self.device)
         if self.num_nodes == 0 or N == 0:
             return Hits(face, t, bary)
         verts = self._corners(dtype)                                        # (F, 3) each: quick row gathers
-        if kernels.active(o):                                               # the compiled twin: one loop per ray
-            self._kernel_traverse(o, d, t_lo, t_hi, verts, any_hit, face, t, bary)
-            return Hits(face, t, bary)
         tris = self.tris.to(dtype)
         for s in range(0, N, chunk):
             sl = slice(s, min(s + chunk, N))

@@ -324,8 +324,8 @@ def _screen_triangles(verts_cam, faces, camera, cull_backfaces, *, reach: float 
     xy_v, q_v = _project(verts_cam, camera, K)                              # each vertex projected once
     if kernels.active(verts_cam):                                           # the compiled twin, face by face
         from .kernels.screen import screen_triangles
-        xy, q = verts_cam.new_empty((F, 3, 2)), verts_cam.new_empty((F, 3))
-        face, face_cross = faces.new_empty(F), faces.new_empty(F)
+        xy, q = kernels.buffer((F, 3, 2), torch.float64), kernels.buffer((F, 3), torch.float64)
+        face, face_cross = kernels.buffer(F, torch.int64), kernels.buffer(F, torch.int64)
         n, n_cross, crosses_far = screen_triangles(
             verts_cam.contiguous().numpy(), faces.contiguous().numpy(), xy_v.contiguous().numpy(),
             q_v.contiguous().numpy(), float(near), float(far), bool(cull_backfaces), bool(camera.orthographic),
@@ -443,8 +443,8 @@ def _kernel_surface(face_map, verts, faces, camera, H, W):
     fm = face_map.contiguous().numpy()
     row, n = faces_seen(fm, faces.shape[0])
     if n:
-        bary = torch.empty(H * W, 3, dtype=dtype)                          # every pixel written below
-        depth = torch.empty(H * W, dtype=dtype)
+        bary = kernels.buffer((H * W, 3), dtype)                           # every pixel written below
+        depth = kernels.buffer(H * W, dtype)
         used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
         coef, z = _kernel_face_table(used, verts, faces, camera)
         K = camera.K.to(dtype)

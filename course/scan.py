@@ -370,9 +370,9 @@ def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
             bool(camera.orthographic), float(camera.far), bool(st.crosses_far))
     capacity = max(1024, 2 * H * W)
     while True:
-        faces = torch.full((H * W,), -1, dtype=torch.int64)
-        keys = torch.full((H * W,), float("inf"), dtype=torch.float64)
-        notes = torch.empty((capacity, 2), dtype=torch.int64)
+        faces = kernels.buffer(H * W, torch.int64, fill=-1)
+        keys = kernels.scratch("zbuffer_keys", H * W, torch.float64).fill_(float("inf"))
+        notes = kernels.scratch("zbuffer_notes", 2 * capacity, torch.int64).view(capacity, 2)
         n = nearest_faces(*args, faces.numpy(), keys.numpy(), notes.numpy())
         if n <= capacity:
             break

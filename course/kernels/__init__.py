@@ -41,9 +41,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 import time
 
-__all__ = ["BACKENDS", "available", "backend", "set_backend", "using", "active", "warm_up", "threads"]
+__all__ = ["BACKENDS", "available", "backend", "set_backend", "using", "active", "warm_up", "threads", "buffer", "scratch"]
 
 BACKENDS = ("numba", "torch")
 _backend = os.environ.get("COURSE_KERNELS", "numba").strip().lower() or "numba"
@@ -96,6 +97,34 @@ def threads() -> int:
     import numba
     import torch
     return max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+
+
+def buffer(shape, dtype, fill=None):
+    """A CPU tensor for a kernel's output, allocated by numpy: numpy asks the OS for huge pages on large
+    buffers, which makes their first touch about ten times cheaper than a fresh ``torch.empty`` of 8 MB (the
+    page faults of a 1024² image's buffers otherwise cost more than the z-buffer itself). fill: a value, or
+    None to leave it uninitialised."""
+    import numpy as np
+    import torch
+    array = np.empty(shape, dtype=torch.empty(0, dtype=dtype).numpy().dtype)
+    if fill is not None:
+        array.fill(fill)
+    return torch.from_numpy(array)
+
+
+_scratch = threading.local()
+
+
+def scratch(name: str, size: int, dtype):
+    """A kernel's working buffer (not an output), kept per thread and reused while it is large enough: the
+    z-buffer's keys would otherwise be fresh memory every call, paid for in page faults. Returns a (size,)
+    CPU tensor with undefined contents; valid until the next ``scratch(name, ...)`` on this thread."""
+    import torch
+    held = getattr(_scratch, name, None)
+    if held is None or held.numel() < size or held.dtype != dtype:
+        held = buffer(max(size, 1), dtype)
+        setattr(_scratch, name, held)
+    return held[:size]
 
 
 def warm_up() -> dict:
