@@ -79,22 +79,25 @@ def pixel_surface(face_map, row_of_face, coef, z, xs, ys, consts, bary, depth):
     z (U, 3); xs (W,), ys (H,): the pixel centres' offsets x - cx, y - cy; consts (2,): 1 and the guard
     ``tiny`` for edge-on faces; all floats in one dtype. Writes bary (H*W, 3) and depth (H*W,): 0 and +inf
     where no face is visible."""
-    W = xs.shape[0]
+    W, H = xs.shape[0], ys.shape[0]
     one, tiny = consts[0], consts[1]
-    for p in range(face_map.shape[0]):
-        f = face_map[p]
-        if f < 0:
-            bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
-            continue
-        r = row_of_face[f]
-        qx, qy = xs[p % W], ys[p // W]
-        w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]                 # (A x' + B y') + C, as in torch
-        w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
-        ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
-        s = tiny if abs(ws) < tiny else ws                                   # edge-on faces: finite
-        b1, b2 = w1 / s, w2 / s
-        bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
-        depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
+    for i in range(H):                                                      # rows and columns: no division
+        qy = ys[i]
+        for j in range(W):
+            p = i * W + j
+            f = face_map[p]
+            if f < 0:
+                bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
+                continue
+            r = row_of_face[f]
+            qx = xs[j]
+            w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]             # (A x' + B y') + C, as in torch
+            w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
+            ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
+            s = tiny if abs(ws) < tiny else ws                               # edge-on faces: finite
+            b1, b2 = w1 / s, w2 / s
+            bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
+            depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
 
 
 def warm_up():
