@@ -610,6 +610,23 @@ def _sample_fragments(face_map, pixels, offsets, verts, faces, camera) -> Fragme
     W = camera.width
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     flat = face_map.reshape(-1)
+    if kernels.active(flat, verts) and not _records_graph(verts, camera):  # no gradient: the compiled twin
+        from .kernels.surface import faces_seen, sample_surface
+        fm = flat.contiguous().numpy()
+        row, n = faces_seen(fm, faces.shape[0])
+        bary, depth = kernels.buffer((P * S, 3), dtype), kernels.buffer(P * S, dtype)
+        if n:
+            coef, z = _kernel_face_table(torch.from_numpy(row >= 0).nonzero().squeeze(1), verts, faces, camera)
+        else:
+            coef, z = torch.zeros(1, 9, dtype=dtype), torch.zeros(1, 3, dtype=dtype)
+        K = camera.K.detach().to(dtype)
+        per_pixel = offsets.dim() == 3
+        off = (offsets if per_pixel else offsets[None]).contiguous()
+        small = [x.contiguous().numpy() for x in (K[:2, 2], torch.tensor([1.0, torch.finfo(dtype).tiny ** 0.5],
+                                                                          dtype=dtype), torch.zeros(2, dtype=dtype))]
+        sample_surface(fm, row, coef.numpy(), z.numpy(), pixels.contiguous().numpy(), off.numpy(), per_pixel, W,
+                       *small, bary.numpy(), depth.numpy())
+        return Fragments(face_map, bary.view(P, S, 3), depth.view(P, S))
     hit = (flat >= 0).nonzero().squeeze(1)                                  # (M,) covered samples
     p, s = hit // S, hit % S
     pix = pixels.index_select(0, p)

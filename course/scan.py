@@ -380,9 +380,40 @@ def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
     if n == 0:
         return faces
     ties = _NearTies(faces)
-    ties.slots, ties.faces = [notes[:n, 0]], [notes[:n, 1]]
+    ties.slots, ties.faces = [notes[:n, 0].clone()], [notes[:n, 1].clone()]   # (the scratch is reused)
     centre = lambda slots: ((slots % W).double() + 0.5, (slots // W).double() + 0.5)   # noqa: E731
     return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *centre(slots)))
+
+
+def _kernel_sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets) -> torch.Tensor:
+    """``_sample_zbuffer`` by ``kernels.samples.sample_faces``: the same face ids, one compiled loop over the
+    listed pixels and their samples; the near-ties it notes are decided by ``_NearTies.resolve`` as there."""
+    from .kernels.samples import sample_faces
+    H, W = camera.height, camera.width
+    P, S = pixels.numel(), offsets.shape[-2]
+    per_pixel = offsets.dim() == 3
+    off = offsets.contiguous() if per_pixel else offsets[None].contiguous()
+    args = (st.xy.contiguous().numpy(), st.q.contiguous().numpy(), st.face.contiguous().numpy(),
+            pixels.contiguous().numpy(), off.numpy(), per_pixel, W, H, bool(camera.orthographic), float(camera.far))
+    capacity = max(1024, 2 * P * S)
+    while True:
+        faces = kernels.buffer(P * S, torch.int64)
+        notes = kernels.scratch("sample_notes", 2 * capacity, torch.int64).view(capacity, 2)
+        n = sample_faces(*args, faces.numpy(), notes.numpy())
+        if n <= capacity:
+            break
+        capacity = n
+    if n == 0:
+        return faces.view(P, S)
+    ties = _NearTies(faces)
+    ties.slots, ties.faces = [notes[:n, 0].clone()], [notes[:n, 1].clone()]
+
+    def sample_point(slots):
+        p, s = slots // S, slots % S
+        pix = pixels.index_select(0, p)
+        o = offsets[s] if offsets.dim() == 2 else offsets[p, s]
+        return (pix % W).double() + o[:, 0], (pix // W).double() + o[:, 1]
+    return ties.resolve(faces, lambda slots, f: _depth_at(st, camera, f, *sample_point(slots))).view(P, S)
 
 
 # ------------------------------------------- stage 2, sub-pixel samples: the pixels a triangle touches
@@ -488,6 +519,8 @@ def _sample_zbuffer(st: _ScreenTriangles, camera, pixels, offsets, budget=CHUNK[
     zbuf = torch.full((P * S,), EMPTY_KEY, dtype=torch.int64, device=device)
     if st.face.numel() == 0 or P == 0:
         return torch.full((P, S), -1, dtype=torch.int64, device=device)
+    if kernels.active(st.xy):                                               # the compiled twin
+        return _kernel_sample_zbuffer(st, camera, pixels, offsets)
     slot_of = torch.full((H * W,), -1, dtype=torch.int64, device=device)
     slot_of[pixels] = torch.arange(P, device=device)
     q0, qx, qy = _plane(st)

@@ -19,6 +19,7 @@ it must agree with, face id for face id.
   gradient is recorded (with a gradient, the torch code runs, so autograd sees every step).
 * ``points.visible_at``: the z-buffer asked at arbitrary points, for the boundary term of visibility
   gradients (twin of ``boundary._visible_at``).
+* ``samples.sample_faces``: the sub-pixel sample z-buffer of supersampling (twin of ``scan._sample_zbuffer``).
 
 Only "which face" is compiled. Barycentrics, depth and everything after them are computed from the face ids
 by the same torch code as before, so every gradient is unchanged (the split nvdiffrast and PyTorch3D make).
@@ -131,10 +132,10 @@ def warm_up() -> dict:
     """Compile (or load from the cache) every kernel for float32 and float64; returns seconds per kernel."""
     if not _AVAILABLE:
         raise RuntimeError(_WHY)
-    from . import points, screen, surface, traverse, zbuffer
+    from . import points, samples, screen, surface, traverse, zbuffer
     times = {}
     for name, module in (("screen", screen), ("zbuffer", zbuffer), ("surface", surface), ("traverse", traverse),
-                         ("points", points)):
+                         ("points", points), ("samples", samples)):
         start = time.perf_counter()
         module.warm_up()
         times[name] = time.perf_counter() - start

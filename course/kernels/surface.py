@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["faces_seen", "face_table", "pixel_surface", "warm_up"]
+__all__ = ["faces_seen", "face_table", "pixel_surface", "sample_surface", "warm_up"]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -100,9 +100,44 @@ def pixel_surface(face_map, row_of_face, coef, z, xs, ys, consts, bary, depth):
             depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
 
 
+@numba.njit(cache=True, error_model="numpy")
+def sample_surface(face_map, row_of_face, coef, z, pixels, offsets, per_pixel, width, centre, consts, tmp, bary,
+                   depth):
+    """``pixel_surface`` at sub-pixel samples (``raster._sample_fragments``): face_map (P * S,) the sample
+    z-buffer; pixels (P,); offsets (1, S, 2), or (P, S, 2) with ``per_pixel``; centre (2,) the principal
+    point (cx, cy), consts (2,) 1 and ``tiny``, tmp (2,) scratch, all three in the output dtype: a sample's
+    float64 position is rounded to that dtype by storing it in tmp, as torch's ``x.to(dtype)`` rounds it."""
+    S = offsets.shape[1]
+    one, tiny = consts[0], consts[1]
+    for k in range(pixels.shape[0]):
+        col, row = pixels[k] % width, pixels[k] // width
+        for s in range(S):
+            p = k * S + s
+            f = face_map[p]
+            if f < 0:
+                bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
+                continue
+            o = k if per_pixel else 0
+            tmp[0], tmp[1] = col + offsets[o, s, 0], row + offsets[o, s, 1]   # float64, rounded on store
+            qx, qy = tmp[0] - centre[0], tmp[1] - centre[1]
+            r = row_of_face[f]
+            w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]
+            w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
+            ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
+            sd = tiny if abs(ws) < tiny else ws
+            b1, b2 = w1 / sd, w2 / sd
+            bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
+            depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
+
+
 def warm_up():
     """Compile ``faces_seen``, ``face_table`` and ``pixel_surface`` (float32, float64), or load them from the cache."""
     faces_seen(np.zeros(1, np.int64), 1)
+    for dt in (np.float32, np.float64):
+        for per_pixel in (False, True):
+            sample_surface(np.zeros(2, np.int64), np.zeros(1, np.int64), np.ones((1, 9), dt), np.ones((1, 3), dt),
+                           np.array([0]), np.full((1, 2, 2), 0.5), per_pixel, 4, np.zeros(2, dt), np.ones(2, dt),
+                           np.zeros(2, dt), np.zeros((2, 3), dt), np.zeros(2, dt))
     for dt in (np.float32, np.float64):
         eye = np.eye(3)
         for ortho in (False, True):
