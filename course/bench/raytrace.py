@@ -228,7 +228,8 @@ def measure(name: str, repeat: int = 3, scale: float = 0.25, n_incoherent: int =
     face_bf = brute_force(o[pix], d[pix], tris64, t_min=t_lo[pix], t_max=t_hi[pix])
     brute_ms = time_it(lambda: brute_force(o[pix], d[pix], tris64, t_min=t_lo[pix], t_max=t_hi[pix]), 1,
                        warmup=0) / pix.numel()
-    ms, other, torch_ms = timed(lambda: raycast(mesh, cam, bvh=bvh), *([lambda: embree.trace(es, o, d)] if embree else []))
+    ms, other, torch_ms = timed(lambda: raycast(mesh, cam, bvh=bvh),
+                                *([lambda: embree.trace(es, o, d)] if embree else []))
     row("primary", o.shape[0], ms, brute_rays=pix.numel(), brute_ms_per_ray=brute_ms,
         agree=float((face_bvh == face_bf).double().mean()), embree_ms=other[0] if embree else None,
         torch_ms=torch_ms)

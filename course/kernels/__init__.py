@@ -21,22 +21,24 @@ it must agree with, face id for face id.
   gradients (twin of ``boundary._visible_at``).
 * ``samples.sample_faces``: the sub-pixel sample z-buffer of supersampling (twin of ``scan._sample_zbuffer``).
 
-Only "which face" is compiled. Barycentrics, depth and everything after them are computed from the face ids
-by the same torch code as before, so every gradient is unchanged (the split nvdiffrast and PyTorch3D make).
+What is compiled is "which face" (the split nvdiffrast and PyTorch3D make), and, only where no gradient is
+recorded, the barycentrics and depth of that face with the torch code's arithmetic. Wherever autograd
+records (``raster._records_graph``), the barycentrics, depth and everything after them are the torch code,
+so every gradient is unchanged.
 
 **Which path runs.** CPU tensors take the kernels when Numba is installed; CUDA tensors always take the
 torch path. ``set_backend("torch")`` (or the environment variable ``COURSE_KERNELS=torch``) forces the torch
 path everywhere, and ``using("torch")`` does so inside a ``with`` block, so a lecture can time one against
 the other and the tests run both. ``backend()`` says which is in force.
 
-**Compilation.** Each kernel is compiled the first time it runs with a new argument type (1-4 s) and
+**Compilation.** Each kernel is compiled the first time it runs with a new argument type (1-10 s) and
 cached on disk (``cache=True``): next to this file in ``__pycache__``, or, where the package is installed
 read-only, in Numba's per-user cache directory (``NUMBA_CACHE_DIR`` overrides both); a second process loads
 it in a few hundredths of a second. ``warm_up()`` compiles every kernel in advance (``python -m course
 bench`` reports the times).
 
 **Threads.** The ray kernel runs its rays in parallel on ``torch.get_num_threads()`` threads (Numba's
-``prange``), so ``torch.set_num_threads(1)`` gives one thread to both. The z-buffer kernel is one loop.
+``prange``), so ``torch.set_num_threads(1)`` gives one thread to both. The other kernels are one loop each.
 """
 from __future__ import annotations
 
@@ -45,7 +47,8 @@ import os
 import threading
 import time
 
-__all__ = ["BACKENDS", "available", "backend", "set_backend", "using", "active", "warm_up", "threads", "buffer", "scratch"]
+__all__ = ["BACKENDS", "available", "backend", "set_backend", "using", "active", "warm_up", "threads", "buffer",
+           "scratch"]
 
 BACKENDS = ("numba", "torch")
 _backend = os.environ.get("COURSE_KERNELS", "numba").strip().lower() or "numba"

@@ -57,9 +57,9 @@ def _watertight(o, kx, ky, kz, sx, sy, sz, a, b, c, s, is32):
     """Woop, Benthin and Wald's watertight test of one ray against one triangle, in the rays' dtype.
 
     o: (3,) the ray's origin, and its frame from ``_ray_frame``; a, b, c: (F, 3) the triangles' corners and s
-    the one to test, all float32 (``is32``) or all float64. Returns t (rounded to the rays' dtype, held in a float64; +inf on a
-    miss), whether it hit, and the barycentric weights U, V, W (float64, before division by their sum). The
-    arithmetic is ``intersect._watertight``'s, operation by operation, so t is bit-identical to it.
+    the one to test, all float32 (``is32``) or all float64. Returns t (rounded to the rays' dtype, held in a
+    float64; +inf on a miss), whether it hit, and the barycentric weights U, V, W (float64, before division by
+    their sum). The arithmetic is ``intersect._watertight``'s, operation by operation, so t is bit-identical.
     """
     ox, oy, oz = o[kx], o[ky], o[kz]
     Ax, Ay, Az = a[s, kx] - ox, a[s, ky] - oy, a[s, kz] - oz              # vertices relative to the origin

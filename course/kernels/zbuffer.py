@@ -19,8 +19,8 @@ depths are compared directly, and every pixel where two depths come within ``NOT
 the torch path does. (The loop compares q = 1/z rather than z, a division less per fragment: the order is
 the same wherever the two are not within rounding of each other, and there they are noted. Along a span q
 is stepped by qx from pixel to pixel, a few rounding errors from evaluating the plane at each centre, far
-below NOTE_RTOL: the noted pairs are decided with the plane evaluated exactly as in torch.) Without a near-tie the nearer face is nearer by more than a rounding error, and both
-paths pick it.
+below NOTE_RTOL: the noted pairs are decided with the plane evaluated exactly as in torch.) Without a
+near-tie the nearer face is nearer by more than a rounding error, and both paths pick it.
 """
 from __future__ import annotations
 
