@@ -436,42 +436,38 @@ def _records_graph(verts, camera) -> bool:
 
 def _kernel_surface(face_map, verts, faces, camera, H, W):
     """``_visible_surface`` by ``kernels.surface.pixel_surface`` where no gradient is recorded: the per-face
-    table from ``_face_table`` (the faces some pixel sees), then one compiled loop over the pixels. The same
-    numbers, bit for bit."""
-    from .kernels.surface import faces_seen, pixel_surface
+    table of the faces some pixel sees (``_kernel_face_table``), then one compiled loop over the pixels. The
+    same numbers, bit for bit."""
+    from .kernels.surface import pixel_surface
     dtype = torch.promote_types(verts.dtype, camera.dtype)
-    fm = face_map.contiguous().numpy()
-    row, n = faces_seen(fm, faces.shape[0])
-    if n:
-        bary = kernels.buffer((H * W, 3), dtype)                           # every pixel written below
-        depth = kernels.buffer(H * W, dtype)
-        used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
-        coef, z = _kernel_face_table(used, verts, faces, camera)
-        K = camera.K.to(dtype)
-        xs = torch.arange(W, dtype=torch.float64).add_(0.5).to(dtype) - K[0, 2]   # as _surface_at: x - cx
-        ys = torch.arange(H, dtype=torch.float64).add_(0.5).to(dtype) - K[1, 2]
-        consts = torch.tensor([1.0, torch.finfo(dtype).tiny ** 0.5], dtype=dtype)
-        pixel_surface(fm, row, *(x.detach().contiguous().numpy() for x in (coef, z, xs, ys, consts)),
-                      bary.numpy(), depth.numpy())
-    else:
-        bary = torch.zeros(H * W, 3, dtype=dtype)
-        depth = torch.full((H * W,), float("inf"), dtype=dtype)
+    fm, row, coef, z = _kernel_face_table(face_map, verts, faces, camera)
+    bary, depth = kernels.buffer((H * W, 3), dtype), kernels.buffer(H * W, dtype)   # every pixel written
+    K = camera.K.detach().to(dtype)
+    xs = torch.arange(W, dtype=torch.float64).add_(0.5).to(dtype) - K[0, 2]   # as _surface_at: x - cx
+    ys = torch.arange(H, dtype=torch.float64).add_(0.5).to(dtype) - K[1, 2]
+    consts = torch.tensor([1.0, torch.finfo(dtype).tiny ** 0.5], dtype=dtype)
+    pixel_surface(fm, row, *(x.contiguous().numpy() for x in (coef, z, xs, ys, consts)), bary.numpy(), depth.numpy())
     return bary.view(H, W, 3), depth.view(H, W)
 
 
-def _kernel_face_table(used, verts, faces, camera):
-    """``_face_table`` by ``kernels.surface.face_table``: the same numbers, one compiled loop over the faces
-    (K⁻¹ and 1 - K22 are formed here, in torch, as there)."""
-    from .kernels.surface import face_table
+def _kernel_face_table(face_map, verts, faces, camera):
+    """``_face_table`` of the faces some entry of ``face_map`` (any shape, -1: none) shows, by
+    ``kernels.surface.face_table``: the same numbers, one compiled loop over the faces (K⁻¹ and 1 - K22 are
+    formed here, in torch, as there). Returns the flat face map as numpy, each face's row in the table (F,)
+    (-1: unseen), coef (U, 9) and z (U, 3)."""
+    from .kernels.surface import face_table, faces_seen
     dtype = torch.promote_types(verts.dtype, camera.dtype)
+    fm = face_map.reshape(-1).contiguous().numpy()
+    row, n = faces_seen(fm, faces.shape[0])
+    used = torch.from_numpy(row >= 0).nonzero().squeeze(1)
     K = camera.K.detach().to(dtype)
     R = camera.R.detach().to(dtype)
-    coef = torch.empty(used.shape[0], 9, dtype=dtype)
-    z = torch.empty(used.shape[0], 3, dtype=dtype)
+    coef = torch.empty(n, 9, dtype=dtype)
+    z = torch.empty(n, 3, dtype=dtype)
     arrays = (used, verts.detach().to(dtype), faces, camera.R.detach().double(), camera.t.detach().double(), R,
               torch.linalg.inv(K).T, (1 - K[2, 2]).reshape(1))
     face_table(*(x.contiguous().numpy() for x in arrays), bool(camera.orthographic), coef.numpy(), z.numpy())
-    return coef, z
+    return fm, row, coef, z
 
 
 def _surface_at(face, x, y, verts, faces, camera):
@@ -611,14 +607,9 @@ def _sample_fragments(face_map, pixels, offsets, verts, faces, camera) -> Fragme
     dtype = torch.promote_types(verts.dtype, camera.dtype)
     flat = face_map.reshape(-1)
     if kernels.active(flat, verts) and not _records_graph(verts, camera):  # no gradient: the compiled twin
-        from .kernels.surface import faces_seen, sample_surface
-        fm = flat.contiguous().numpy()
-        row, n = faces_seen(fm, faces.shape[0])
+        from .kernels.surface import sample_surface
+        fm, row, coef, z = _kernel_face_table(flat, verts, faces, camera)
         bary, depth = kernels.buffer((P * S, 3), dtype), kernels.buffer(P * S, dtype)
-        if n:
-            coef, z = _kernel_face_table(torch.from_numpy(row >= 0).nonzero().squeeze(1), verts, faces, camera)
-        else:
-            coef, z = torch.zeros(1, 9, dtype=dtype), torch.zeros(1, 3, dtype=dtype)
         K = camera.K.detach().to(dtype)
         per_pixel = offsets.dim() == 3
         off = (offsets if per_pixel else offsets[None]).contiguous()

@@ -361,14 +361,15 @@ def _zbuffer(st: _ScreenTriangles, camera, budget=CHUNK) -> torch.Tensor:
 
 
 
-def _kernel_zbuffer(st: _ScreenTriangles, camera) -> torch.Tensor:
+def _kernel_zbuffer(st: _ScreenTriangles, camera, capacity: int | None = None) -> torch.Tensor:
     """``_zbuffer`` by ``kernels.zbuffer.nearest_faces``: the same face ids, one compiled loop over the
-    triangles, their rows and pixels; the near-ties it notes are decided by ``_NearTies.resolve`` as here."""
+    triangles, their rows and pixels; the near-ties it notes are decided by ``_NearTies.resolve`` as here.
+    capacity: room for notes in the first call (default two per pixel; more: the call is repeated)."""
     from .kernels.zbuffer import nearest_faces
     H, W = camera.height, camera.width
     args = (st.xy.contiguous().numpy(), st.q.contiguous().numpy(), st.face.contiguous().numpy(), W, H,
             bool(camera.orthographic), float(camera.far), bool(st.crosses_far))
-    capacity = max(1024, 2 * H * W)
+    capacity = max(1024, 2 * H * W) if capacity is None else capacity
     while True:
         faces = kernels.buffer(H * W, torch.int64, fill=-1)
         keys = kernels.scratch("zbuffer_keys", H * W, torch.float64).fill_(float("inf"))

@@ -140,21 +140,28 @@ def test_surface_without_gradient_is_the_differentiable_surface():
 
 
 def test_near_ties_are_noted_even_when_the_buffer_overflows(monkeypatch):
-    """Coplanar faces everywhere: more near-ties than the first notes buffer holds; the kernel says so, the
-    caller retries with room for all, and the lower face id wins every pixel, as on the torch path."""
+    """Coplanar faces everywhere: with room for only 4 notes the kernel reports how many it needed, the caller
+    calls it again with room for all, and every pixel gets the face the torch path gives (the lower face id)."""
     from course import scan
+    from course.kernels import zbuffer
+    from course.raster import _camera_space, _screen_triangles
     mesh = z_fighting()
     cam = Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=64, height=64, dtype=torch.float64)
-    calls = []
-    real = scan._kernel_zbuffer
+    st = _screen_triangles(_camera_space(mesh.verts, cam), mesh.faces, cam, False)
+    returned = []
+    real = zbuffer.nearest_faces
 
-    def spy(st, camera):
-        calls.append(1)
-        return real(st, camera)
-    monkeypatch.setattr(scan, "_kernel_zbuffer", spy)
-    a, b = both(lambda: rasterize(mesh, cam))
-    assert calls and torch.equal(a.face_id, b.face_id)
-    covered = a.face_id[a.mask]
+    def spy(*args):
+        returned.append(real(*args))
+        return returned[-1]
+    monkeypatch.setattr(zbuffer, "nearest_faces", spy)
+    with kernels.using("numba"):
+        faces = scan._kernel_zbuffer(st, cam, capacity=4)
+    with kernels.using("torch"):
+        expected = scan._zbuffer(st, cam)
+    assert len(returned) == 2 and returned[0] > 4 and returned[1] == returned[0]   # overflowed, then fitted
+    assert torch.equal(faces, expected)
+    covered = faces[faces >= 0]
     assert covered.numel() > 1000 and int(covered.min()) == 0               # faces 0, 1 (lower ids) win the overlap
 
 

@@ -20,6 +20,8 @@ import math
 import numba
 import numpy as np
 
+from .zbuffer import _plane
+
 __all__ = ["visible_at", "warm_up"]
 
 
@@ -51,37 +53,46 @@ def _box(xy, t, width, height):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def _buckets(xy, slot_of, n_slots, width, height):
+    """The triangles whose widened bounding boxes reach each bucket: slot_of (H*W,) the bucket of each pixel
+    (-1: none wanted). Returns start (n_slots + 1,) and bucket: bucket k holds bucket[start[k]:start[k + 1]]."""
+    start = np.zeros(n_slots + 1, np.int64)                                 # bucket sizes, then offsets
+    for t in range(xy.shape[0]):
+        c0, c1, r0, r1 = _box(xy, t, width, height)
+        for r in range(r0, r1 + 1):
+            for c in range(c0, c1 + 1):
+                k = slot_of[r * width + c]
+                if k >= 0:
+                    start[k + 1] += 1
+    for k in range(n_slots):
+        start[k + 1] += start[k]
+    bucket = np.empty(start[n_slots], np.int64)
+    fill = start[:n_slots].copy()
+    for t in range(xy.shape[0]):
+        c0, c1, r0, r1 = _box(xy, t, width, height)
+        for r in range(r0, r1 + 1):
+            for c in range(c0, c1 + 1):
+                k = slot_of[r * width + c]
+                if k >= 0:
+                    bucket[fill[k]] = t
+                    fill[k] += 1
+    return start, bucket
+
+
+@numba.njit(cache=True, error_model="numpy")
 def visible_at(xy, q, face, px, py, width, height, orthographic, far, out):
     """xy (T, 3, 2) float64 screen triangles (positive area), q (T, 3) their screen-affine q (1/z, or z),
     face (T,) face ids; px, py (N,) float64 points. Writes out (N,): the face nearest at each point, -1 for
     none or outside the image."""
     n_pix = width * height
     cell = np.full(px.shape[0], -1, np.int64)
-    wanted = np.zeros(n_pix, np.bool_)
+    slot_of = np.full(n_pix, -1, np.int64)                                  # a bucket for each pixel with a point
     for i in range(px.shape[0]):                                            # the pixel of each point
         col, row = math.floor(px[i]), math.floor(py[i])
         if 0 <= col < width and 0 <= row < height:
             cell[i] = int(row) * width + int(col)
-            wanted[cell[i]] = True
-    start = np.zeros(n_pix + 1, np.int64)                                   # bucket sizes, then offsets
-    for t in range(xy.shape[0]):
-        c0, c1, r0, r1 = _box(xy, t, width, height)
-        for r in range(r0, r1 + 1):
-            for c in range(c0, c1 + 1):
-                if wanted[r * width + c]:
-                    start[r * width + c + 1] += 1
-    for p in range(n_pix):
-        start[p + 1] += start[p]
-    bucket = np.empty(start[n_pix], np.int64)                               # the triangles of each pixel
-    fill = start[:n_pix].copy()
-    for t in range(xy.shape[0]):
-        c0, c1, r0, r1 = _box(xy, t, width, height)
-        for r in range(r0, r1 + 1):
-            for c in range(c0, c1 + 1):
-                p = r * width + c
-                if wanted[p]:
-                    bucket[fill[p]] = t
-                    fill[p] += 1
+            slot_of[cell[i]] = cell[i]
+    start, bucket = _buckets(xy, slot_of, n_pix, width, height)
     for i in range(px.shape[0]):
         out[i] = -1
         p = cell[i]
@@ -92,12 +103,7 @@ def visible_at(xy, q, face, px, py, width, height, orthographic, far, out):
             t = bucket[k]
             if not _covers(xy, t, px[i], py[i]):
                 continue
-            e1x, e1y = xy[t, 1, 0] - xy[t, 0, 0], xy[t, 1, 1] - xy[t, 0, 1]     # scan._plane
-            e2x, e2y = xy[t, 2, 0] - xy[t, 0, 0], xy[t, 2, 1] - xy[t, 0, 1]
-            d1, d2 = q[t, 1] - q[t, 0], q[t, 2] - q[t, 0]
-            det = e1x * e2y - e1y * e2x
-            qx, qy = (d1 * e2y - d2 * e1y) / det, (d2 * e1x - d1 * e2x) / det
-            q0 = q[t, 0] - qx * xy[t, 0, 0] - qy * xy[t, 0, 1]
+            q0, qx, qy = _plane(xy, q, t)                                   # scan._plane, then _depth_at
             qp = q0 + qx * px[i] + qy * py[i]
             depth = qp if orthographic else 1 / qp
             if not depth <= far:

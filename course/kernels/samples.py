@@ -19,7 +19,8 @@ import math
 import numba
 import numpy as np
 
-from .points import _box, _covers
+from .points import _buckets, _covers
+from .zbuffer import _plane
 
 __all__ = ["sample_faces", "warm_up"]
 
@@ -37,26 +38,7 @@ def sample_faces(xy, q, face, pixels, offsets, per_pixel, width, height, orthogr
     for k in range(pixels.shape[0]):
         slot_of[pixels[k]] = k
     S = offsets.shape[-2]
-    start = np.zeros(pixels.shape[0] + 1, np.int64)                         # buckets of the listed pixels
-    for t in range(xy.shape[0]):
-        c0, c1, r0, r1 = _box(xy, t, width, height)
-        for r in range(r0, r1 + 1):
-            for c in range(c0, c1 + 1):
-                k = slot_of[r * width + c]
-                if k >= 0:
-                    start[k + 1] += 1
-    for k in range(pixels.shape[0]):
-        start[k + 1] += start[k]
-    bucket = np.empty(start[pixels.shape[0]], np.int64)
-    fill = start[:pixels.shape[0]].copy()
-    for t in range(xy.shape[0]):
-        c0, c1, r0, r1 = _box(xy, t, width, height)
-        for r in range(r0, r1 + 1):
-            for c in range(c0, c1 + 1):
-                k = slot_of[r * width + c]
-                if k >= 0:
-                    bucket[fill[k]] = t
-                    fill[k] += 1
+    start, bucket = _buckets(xy, slot_of, pixels.shape[0], width, height)   # the listed pixels' triangles
     far32 = np.float32(far)
     n_notes, cap = 0, notes.shape[0]
     for k in range(pixels.shape[0]):
@@ -72,12 +54,8 @@ def sample_faces(xy, q, face, pixels, offsets, per_pixel, width, height, orthogr
                 t = bucket[b]
                 if not _covers(xy, t, px, py):
                     continue
-                e1x, e1y = xy[t, 1, 0] - xy[t, 0, 0], xy[t, 1, 1] - xy[t, 0, 1]     # scan._plane
-                e2x, e2y = xy[t, 2, 0] - xy[t, 0, 0], xy[t, 2, 1] - xy[t, 0, 1]
-                d1, d2 = q[t, 1] - q[t, 0], q[t, 2] - q[t, 0]
-                det = e1x * e2y - e1y * e2x
-                qx, qy = (d1 * e2y - d2 * e1y) / det, (d2 * e1x - d1 * e2x) / det
-                qp = q[t, 0] - qx * xy[t, 0, 0] - qy * xy[t, 0, 1] + qx * px + qy * py
+                q0, qx, qy = _plane(xy, q, t)                               # scan._plane, as torch evaluates it
+                qp = q0 + qx * px + qy * py
                 q32 = np.float32(qp)                                        # the far plane on float32 depth
                 d32 = q32 if orthographic else np.float32(1.0) / q32
                 if not d32 <= far32:

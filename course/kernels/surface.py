@@ -73,6 +73,23 @@ def faces_seen(face_map, n_faces):
     return row, n
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _surface(f, qx, qy, p, row_of_face, coef, z, one, tiny, bary, depth):
+    """Write bary[p] and depth[p] of face f (-1: none) at the point whose offset to the principal point is
+    (qx, qy): ``raster._surface_at``'s arithmetic, operation by operation, in the arrays' dtype."""
+    if f < 0:
+        bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
+        return
+    r = row_of_face[f]
+    w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]                     # (A x' + B y') + C, as in torch
+    w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
+    ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
+    s = tiny if abs(ws) < tiny else ws                                       # edge-on faces: finite
+    b1, b2 = w1 / s, w2 / s
+    bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
+    depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
+
+
 @numba.njit(cache=True, error_model="numpy")
 def pixel_surface(face_map, row_of_face, coef, z, xs, ys, consts, bary, depth):
     """face_map (H*W,) int64 (-1: no face); row_of_face (F,) the row of each face in coef (U, 9) and
@@ -82,22 +99,9 @@ def pixel_surface(face_map, row_of_face, coef, z, xs, ys, consts, bary, depth):
     W, H = xs.shape[0], ys.shape[0]
     one, tiny = consts[0], consts[1]
     for i in range(H):                                                      # rows and columns: no division
-        qy = ys[i]
         for j in range(W):
             p = i * W + j
-            f = face_map[p]
-            if f < 0:
-                bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
-                continue
-            r = row_of_face[f]
-            qx = xs[j]
-            w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]             # (A x' + B y') + C, as in torch
-            w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
-            ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
-            s = tiny if abs(ws) < tiny else ws                               # edge-on faces: finite
-            b1, b2 = w1 / s, w2 / s
-            bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
-            depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
+            _surface(face_map[p], xs[j], ys[i], p, row_of_face, coef, z, one, tiny, bary, depth)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -113,25 +117,14 @@ def sample_surface(face_map, row_of_face, coef, z, pixels, offsets, per_pixel, w
         col, row = pixels[k] % width, pixels[k] // width
         for s in range(S):
             p = k * S + s
-            f = face_map[p]
-            if f < 0:
-                bary[p, 0], bary[p, 1], bary[p, 2], depth[p] = 0, 0, 0, np.inf
-                continue
             o = k if per_pixel else 0
             tmp[0], tmp[1] = col + offsets[o, s, 0], row + offsets[o, s, 1]   # float64, rounded on store
-            qx, qy = tmp[0] - centre[0], tmp[1] - centre[1]
-            r = row_of_face[f]
-            w1 = coef[r, 0] * qx + coef[r, 3] * qy + coef[r, 6]
-            w2 = coef[r, 1] * qx + coef[r, 4] * qy + coef[r, 7]
-            ws = coef[r, 2] * qx + coef[r, 5] * qy + coef[r, 8]
-            sd = tiny if abs(ws) < tiny else ws
-            b1, b2 = w1 / sd, w2 / sd
-            bary[p, 0], bary[p, 1], bary[p, 2] = one - b1 - b2, b1, b2
-            depth[p] = z[r, 0] + b1 * z[r, 1] + b2 * z[r, 2]
+            _surface(face_map[p], tmp[0] - centre[0], tmp[1] - centre[1], p, row_of_face, coef, z, one, tiny,
+                     bary, depth)
 
 
 def warm_up():
-    """Compile ``faces_seen``, ``face_table`` and ``pixel_surface`` (float32, float64), or load them from the cache."""
+    """Compile the surface kernels for float32 and float64 (or load them from the cache)."""
     faces_seen(np.zeros(1, np.int64), 1)
     for dt in (np.float32, np.float64):
         for per_pixel in (False, True):
