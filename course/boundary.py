@@ -676,21 +676,11 @@ def _side_offset(gap):
     return OFFSET * gap.clamp(max=1.0)
 
 
-def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
-    """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
-    differentiated by autograd through the edges' screen positions (see the module docstring).
-
-    Everything is evaluated in float64 whatever the problem's dtype: the visibility samples sit 1e-6 px
-    beside an edge, below float32's resolution a few pixels from the origin, so a float32 problem is cast
-    up (differentiably) and its gradient cast back. A float32 scene then gets the float64 answer for its own
-    (float32) numbers."""
-    p = prob.leaves(names)
-    targets = prob.targets(p, names)
-    p = {k: v.double() for k, v in p.items()}                              # the same parameters, in float64
-    edges, e, s, weight, pix, gap = _boundary_points(prob, p, order, samples, generator)
+def _jumps(prob, p, edges, e, s, weight, pix, gap):
+    """(N,) the integrand of the boundary term at the points (e, s) without its speed, times their weights:
+    ``weight · Σ_channels w (c_in - c_out)`` where the edge bounds what is visible there (the z-buffer asked
+    ``_side_offset(gap)`` beside it, on both sides), 0 where it does not."""
     a, b, n, face, vid = edges.a, edges.b, edges.n, edges.face, edges.vid
-    if e.numel() == 0:
-        return prob.gradients((None,) * len(names), targets, names)
     mesh, cam = prob.mesh(p), prob.camera(p)
     with torch.no_grad():
         x = a.detach()[e] + s[:, None] * (b.detach()[e] - a.detach()[e])  # (N, 2) on the edge
@@ -723,19 +713,65 @@ def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
         value = value + torch.where(fold, term(twin, own, inside, outside),   # fold) or against it
                                     -term(twin, own, outside, inside))
         value = value * weight
+    return value
+
+
+def normal_shift(prob, p, edges, e, s, x):
+    """(N,) how far the points x (N, 2) on the curves (e, s) have moved along their normals ``edges.n``,
+    differentiable in the parameters p and 0 at their values: its derivative is the normal speed v_n. On a face
+    edge the point at s moves with the edge's ends; on an intersection line, where n_f - n_g = 0 (the two
+    faces' nearness planes, ``_planes``), a point moves along the normal by ``(n_f - n_g)(x; π) / |∇(n_f - n_g)|``."""
+    a, b, n = edges.a, edges.b, edges.n
+    out = x.new_zeros(e.shape[0])
+    m = e < edges.n_edges                                                   # face edges
+    xq = a[e[m]] + s[m, None] * (b[e[m]] - a[e[m]])                         # differentiable in π
+    out = out.index_put((m.nonzero().squeeze(1),), ((xq - xq.detach()) * n[e[m]]).sum(1))
+    if (~m).any():                                                          # intersection lines
+        k = e[~m]
+        mesh, cam = prob.mesh(p), prob.camera(p)
+        planes = _planes(cam.to_camera(mesh.verts), prob.faces, cam.K, cam.orthographic)
+        L = planes[edges.face[k]] - planes[edges.other[k - edges.n_edges]]  # (N, 3)
+        xl = x[~m].detach()
+        size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
+        shift = (L[:, 0] * xl[:, 0] + L[:, 1] * xl[:, 1] + L[:, 2]) / size
+        out = out.index_put(((~m).nonzero().squeeze(1),), shift - shift.detach())
+    return out
+
+
+def boundary_pieces(prob, p):
+    """The pieces of curve inside each pixel along which the image jumps (lecture 09's reparameterization
+    follows them): edges (``_Edges``), and per piece its curve e, its ends s0 < s1 on it (fractions of a → b),
+    its pixel, and ``Σ w (c_in - c_out)`` at its midpoint (never 0: pieces where nothing jumps are left out).
+    p: the parameters in float64."""
+    edges, e, s, weight, pix, gap = _boundary_points(prob, p, 1, None, None)
+    if e.numel() == 0:
+        return edges, e, s, s, pix, s
+    length = (edges.b.detach() - edges.a.detach()).norm(dim=1)[e]
+    half = weight / (2 * length)                                            # order 1: the midpoint, 2 × half
+    value = _jumps(prob, p, edges, e, s, torch.ones_like(weight), pix, gap)
+    keep = value != 0
+    return edges, e[keep], (s - half)[keep], (s + half)[keep], pix[keep], value[keep]
+
+
+def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
+    """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
+    differentiated by autograd through the edges' screen positions (see the module docstring).
+
+    Everything is evaluated in float64 whatever the problem's dtype: the visibility samples sit 1e-6 px
+    beside an edge, below float32's resolution a few pixels from the origin, so a float32 problem is cast
+    up (differentiably) and its gradient cast back. A float32 scene then gets the float64 answer for its own
+    (float32) numbers."""
+    p = prob.leaves(names)
+    targets = prob.targets(p, names)
+    p = {k: v.double() for k, v in p.items()}                              # the same parameters, in float64
+    edges, e, s, weight, pix, gap = _boundary_points(prob, p, order, samples, generator)
+    if e.numel() == 0:
+        return prob.gradients((None,) * len(names), targets, names)
+    value = _jumps(prob, p, edges, e, s, weight, pix, gap)
     keep = (value != 0).nonzero().squeeze(1)
     e, s, value = e[keep], s[keep], value[keep]
-    # face edges: the point moves with the edge's ends, d/dπ (n · x) = v_n
-    m = e < edges.n_edges
-    xq = a[e[m]] + s[m, None] * (b[e[m]] - a[e[m]])                         # differentiable in π
-    surrogate = (value[m] * (xq * n[e[m]]).sum(1)).sum()                    # d/dπ = Σ value · v_n
-    if (~m).any():                                                          # intersection lines: where
-        k = e[~m]                                                           # n_f - n_g = 0, moving at
-        planes = _planes(cam.to_camera(p["verts"]), prob.faces, cam.K, cam.orthographic)   # v_n = ∂(n_f - n_g)/∂π / |∇|
-        L = planes[face[k]] - planes[edges.other[k - edges.n_edges]]        # (N, 3)
-        x = (a[k] + s[~m, None] * (b[k] - a[k])).detach()
-        size = L[:, :2].detach().norm(dim=1).clamp_min(1e-300)
-        surrogate = surrogate + (value[~m] * (L[:, 0] * x[:, 0] + L[:, 1] * x[:, 1] + L[:, 2]) / size).sum()
+    x = edges.a.detach()[e] + s[:, None] * (edges.b.detach()[e] - edges.a.detach()[e])
+    surrogate = (value * normal_shift(prob, p, edges, e, s, x)).sum()       # d/dπ = Σ value · v_n
     if prob.model == "affine":                                              # the interior term: the colour field
         surrogate = surrogate + _interior(prob, p)                          # moves under fixed pieces
     grads = torch.autograd.grad(surrogate, targets, allow_unused=True) if surrogate.requires_grad else \

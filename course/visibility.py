@@ -28,6 +28,11 @@ The methods (``method=``), each a function of this module:
 * ``"edge_sampling"`` (Li, Aittala, Durand and Lehtinen, SIGGRAPH Asia 2018): the same integrand at
   ``samples`` random points on the edges, chosen with probability proportional to their length. Unbiased;
   its variance falls as 1 / samples.
+* ``"reparameterization"``: change the variables of each pixel's integral so that the jumps stay put
+  (``course.warp``: a warp field continuous over the pixel, equal to the jumps' normal speed on them and 0 on
+  the pixel's border: Bangaru, Li and Durand's warped-area sampling), then differentiate under the integral
+  at ``samples`` stratified points per pixel. Unbiased (``warp="harmonic"``); ``warp="nearest"`` follows one
+  jump per point, as Loubet, Holzschuch and Jakob's estimator, and is biased where two share a pixel.
 * ``"nmr"`` and ``"soft"``: the gradients of lecture 08, of a different image (the hard one, or a blurred
   one): ``nmr.nmr_rasterize`` and ``soft.soft_rasterize``. They are here to be compared, not because they
   estimate this derivative.
@@ -38,7 +43,7 @@ piece's area times the colour at its centroid). With affine colours the interior
 fixed pieces (``boundary._interior``), and the boundary integrand is the product of two linear functions along a
 piece: exact with ``order=2``, not with 1.
 
-What "equal" covers. ``exact``, ``reynolds`` (and the mean of ``edge_sampling``) compute the same number,
+What "equal" covers. ``exact``, ``reynolds`` (and the means of ``edge_sampling`` and ``reparameterization``) compute the same number,
 to rounding (about 1e-12 relative in float64), on every scene the tests know: meshes closed or open, faces
 that pass through each other (the crossing ending on an open boundary, at a corner, or through a shared
 vertex), faces clipped by the near plane, seams, and scenes with kinks: where a line of the scene lies exactly
@@ -77,13 +82,15 @@ from .raster import _check_inputs, interpolate, rasterize
 from .nmr import nmr_image, nmr_rasterize
 from .soft import soft_rasterize
 from .tensors import _check_count, as_tensor
+from .warp import WARPS, warp_gradient
 
 __all__ = ["image_gradient", "METHODS", "PARAMETERS", "boundary_points", "boundary_gradient"]
 
-METHODS = ("exact", "finite_differences", "edge_sampling", "reynolds", "nmr", "soft")
+METHODS = ("exact", "finite_differences", "edge_sampling", "reynolds", "reparameterization", "nmr", "soft")
 PARAMETERS = ("verts", "R", "t", "focal", "colors")
 OPTIONS = {"exact": (), "finite_differences": ("step", "scheme", "vertices"), "reynolds": ("order",),
            "edge_sampling": ("samples", "seed", "generator"), "nmr": ("reach",),
+           "reparameterization": ("samples", "kernel", "warp", "seed", "generator"),
            "soft": ("sigma", "gamma", "threshold")}                         # the options of each method
 
 
@@ -306,6 +313,16 @@ def _other_image_gradient(prob, names, render):
 
 # ------------------------------------------------------------------------------------- the front door
 
+def _generator(options):
+    """The random numbers of the sampling methods: ``generator``, or a fresh one seeded with ``seed`` (0)."""
+    generator, seed = options.pop("generator", None), options.pop("seed", 0)
+    if generator is None:
+        return torch.Generator().manual_seed(_count(seed, "seed", None, minimum=0))
+    if not isinstance(generator, torch.Generator):
+        raise ValueError(f"generator must be a torch.Generator, got {type(generator).__name__}")
+    return generator
+
+
 def image_gradient(mesh, camera, colors, weights, *, method, model="flat", background=(0.0, 0.0, 0.0),
                    wrt=None, **options):
     """The gradient of ``L = Σ weights ⊙ image`` (the box-filtered image) by one method of lecture 09.
@@ -318,7 +335,8 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     options: ``dtype`` (every method; default promote(verts, camera)); finite_differences: ``step`` (1e-4),
     ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
     reynolds: ``order`` (Gauss points per pixel piece of edge, 1); edge_sampling: ``samples`` (1000),
-    ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma`` (1e-4), ``threshold``; nmr: ``reach``.
+    ``generator`` or ``seed``; reparameterization: ``samples`` (per pixel, 16), ``kernel`` (pixels, 1.0; None:
+    no limit), ``warp`` ("harmonic" / "nearest"), ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma`` (1e-4), ``threshold``; nmr: ``reach``.
     """
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -340,19 +358,22 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
         grads = exact_gradient(prob, names)
     elif method == "finite_differences":
         grads = fd_gradient(prob, names, **options)
-    elif method in ("reynolds", "edge_sampling"):
+    elif method in ("reynolds", "edge_sampling", "reparameterization"):
         geo = [n for n in names if n != "colors"]
         if method == "reynolds":
             g = boundary_gradient(prob, geo, order=_count(options.pop("order", 1), "order", 64))
-        else:
-            generator = options.pop("generator", None)
-            seed = options.pop("seed", 0)
-            if generator is None:
-                generator = torch.Generator().manual_seed(_count(seed, "seed", None, minimum=0))
-            elif not isinstance(generator, torch.Generator):
-                raise ValueError(f"generator must be a torch.Generator, got {type(generator).__name__}")
+        elif method == "edge_sampling":
             g = boundary_gradient(prob, geo, samples=_count(options.pop("samples", 1000), "samples", None),
-                                  generator=generator)
+                                  generator=_generator(options))
+        else:
+            kernel, warp = options.pop("kernel", 1.0), options.pop("warp", "harmonic")
+            if kernel is not None and (isinstance(kernel, bool) or not isinstance(kernel, (int, float))
+                                       or not 0 < kernel < math.inf):
+                raise ValueError(f"kernel must be a positive number of pixels (or None: no limit), got {kernel!r}")
+            if warp not in WARPS:
+                raise ValueError(f"warp must be one of {', '.join(WARPS)}, got {warp!r}")
+            g = warp_gradient(prob, geo, samples=_count(options.pop("samples", 16), "samples", None),
+                              kernel=kernel, warp=warp, generator=_generator(options))
         by_name = dict(zip(geo, g))
         if "colors" in names:                                               # linear: the exact derivative
             by_name["colors"] = exact_gradient(prob, ("colors",))[0]        # (the interior term, exactly)

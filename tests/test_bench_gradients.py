@@ -51,16 +51,17 @@ def test_scenes_are_float64_front_facing_and_the_weights_are_what_they_say():
 def test_measure_scene_rows_and_errors_on_one_triangle():
     sc = gb.make_scene("triangle")
     specs = gb.method_specs(steps={torch.float64: (1e-6,), torch.float32: (1e-3,)}, samples=(200,),
-                            sigmas=(1e-4,), orders=(1,))
+                            sigmas=(1e-4,), orders=(1,), warp_samples=(64,))
     rows = gb.measure_scene(sc, "random", specs, repeat=1)
     by = {(r["family"], r["param"]): r for r in rows}
-    assert [r["method"] for r in rows] == ["exact", "reynolds", "edge_sampling", "finite_differences",
-                                           "finite_differences", "soft", "nmr"]
+    assert [r["method"] for r in rows] == ["exact", "reynolds", "edge_sampling", "reparameterization",
+                                           "finite_differences", "finite_differences", "soft", "nmr"]
     assert by[("exact", "")]["rel"] == 0 and by[("exact", "")]["x_exact"] == 1
     assert by[("reynolds", "order 1")]["rel"] < 1e-12                       # exact for flat colours
     assert by[("FD float64", "h=1e-06")]["rel"] < 1e-5
     assert by[("FD float32", "h=1e-03")]["dtype"] == "float32"
     assert 0 < by[("edge sampling", "200 smp")]["rel"] < 1                  # noisy but an estimate
+    assert 0 < by[("reparameterization", "64 spp")]["rel"] < 1 and by[("reparameterization", "64 spp")]["cos"] > 0.5
     for r in rows:
         assert r["ms"] > 0 and math.isfinite(r["rel"]) and -1 <= r["cos"] <= 1 + 1e-12 and not r["abs"]
 

@@ -280,7 +280,8 @@ def test_bad_options_are_refused_by_name(options, match):
         image_gradient(mesh, cam, colors, weights, **options)
 
 
-@pytest.mark.parametrize("method", ["exact", "finite_differences", "reynolds", "edge_sampling", "nmr", "soft"])
+@pytest.mark.parametrize("method", ["exact", "finite_differences", "reynolds", "edge_sampling", "reparameterization",
+                                    "nmr", "soft"])
 def test_a_mesh_without_faces_has_zero_gradient(method):
     """Nothing drawn, nothing to move: every method returns zeros of the right shapes (NMR used to raise an
     IndexError)."""

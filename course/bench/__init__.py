@@ -17,7 +17,7 @@
 * ``soft`` (``course.bench.soft``): the hard rasterizer, NMR's approximate gradient and soft rasterization
   (σ, γ, threshold) on S4: forward and forward+backward time, image error to the exact box-filtered image.
 * ``gradients`` (``course.bench.gradients``): visibility gradients (finite differences, edge sampling,
-  Reynolds, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
+  Reynolds, reparameterization, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
   error, a table and a Pareto plot.
 * ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
 * ``kernels`` (``course.bench.kernels``): the compiled kernels' cold start, compile and cache-load times.

@@ -11,7 +11,8 @@ float32. The loss is ``L = Σ weights ⊙ image`` with two kinds of weights:
 * **random**: seeded standard normal weights, every pixel counts.
 
 Methods: ``exact`` (the reference, timed too), ``reynolds`` (orders 1 and 2), ``edge_sampling`` (several sample
-counts, seed 0), ``finite_differences`` (central, several steps, float64 and float32), ``soft`` (several σ,
+counts, seed 0), ``reparameterization`` (the harmonic warp, 16 and 256 samples per pixel that holds a jump,
+seed 0), ``finite_differences`` (central, several steps, float64 and float32), ``soft`` (several σ,
 NDC units, γ = 1e-4) and ``nmr``. Soft and NMR differentiate a different image (a blurred one, the hard one),
 so their error measures how far their gradient is from the box-filtered image's, not an estimator's error.
 
@@ -79,14 +80,15 @@ __all__ = ["SCENES", "DEFAULT_SCENES", "make_scene", "weights_for", "method_spec
            "run"]
 
 REPEAT = 3               # timed runs per measurement (a call over a second is run once)
-DESCRIPTION = ("visibility gradients (finite differences, edge sampling, Reynolds, soft, NMR) against the exact "
-               "gradient: time against error, a table and a Pareto plot")
+DESCRIPTION = ("visibility gradients (finite differences, edge sampling, Reynolds, reparameterization, soft, NMR) "
+               "against the exact gradient: time against error, a table and a Pareto plot")
 
 SCENES = ("triangle", "triangles", "S4-64", "S4-256", "spheres", "pose", "affine", "S1")
 DEFAULT_SCENES = ("triangle", "triangles", "S4-64", "S4-256", "spheres", "pose", "affine")
 WEIGHTS = ("L2", "random")
 FD_STEPS = {torch.float64: (1e-3, 1e-5, 1e-7), torch.float32: (1e-2, 1e-3, 1e-4)}
 SAMPLES = (1_000, 10_000, 100_000)
+WARP_SAMPLES = (16, 256)                 # reparameterization: samples per pixel that holds a jump
 SIGMAS = (1e-5, 1e-4, 1e-3)
 ORDERS = (1, 2)
 FD_ALL_VERTICES = 12     # meshes with more vertices: finite differences on a seeded subset
@@ -189,7 +191,7 @@ def weights_for(scene: dict, kind: str, seed: int = 0) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------------------------- methods
 
-def method_specs(steps=None, samples=SAMPLES, sigmas=SIGMAS, orders=ORDERS) -> list[dict]:
+def method_specs(steps=None, samples=SAMPLES, sigmas=SIGMAS, orders=ORDERS, warp_samples=WARP_SAMPLES) -> list[dict]:
     """The methods of one scene, each ``dict(method, family, param, dtype, options)``, exact first."""
     steps = FD_STEPS if steps is None else steps
     specs = [dict(method="exact", family="exact", param="", dtype="float64", options={})]
@@ -197,6 +199,8 @@ def method_specs(steps=None, samples=SAMPLES, sigmas=SIGMAS, orders=ORDERS) -> l
               for k in orders]
     specs += [dict(method="edge_sampling", family="edge sampling", param=f"{n:,} smp", dtype="float64",
                    options=dict(samples=n, seed=0)) for n in samples]
+    specs += [dict(method="reparameterization", family="reparameterization", param=f"{n:,} spp", dtype="float64",
+                   options=dict(samples=n, seed=0)) for n in warp_samples]
     for dtype, hs in steps.items():
         name = str(dtype).replace("torch.", "")
         specs += [dict(method="finite_differences", family=f"FD {name}", param=f"h={h:.0e}", dtype=name,
@@ -517,6 +521,8 @@ rel L2: ‖g - g*‖ / ‖g*‖ over every entry, g* the exact gradient ("abs": 
   pose row: the largest over R, t, focal. cosine: of g and g* (pose: each parameter's block scaled to unit g*).
 × exact: the method's time (forward + gradient, one image_gradient call) over the exact gradient's on the same
   row; below 1 it is cheaper than differentiating the closed form, above 1 dearer.
+reparameterization: the harmonic warp (course.warp), "spp" samples per pixel that holds a jump; unbiased, its
+  variance gathers where a jump meets a pixel's border or two jumps moving differently meet.
 FD: central differences of the closed-form image in the dtype shown (float32: round-off eps/h swamps it);
   "k of V vertices": a fixed seeded subset of the vertices the loss depends on, error over those entries.
 soft, NMR: gradients of a different image (blurred, or hard with NMR's approximation), not estimators of this one."""
@@ -524,7 +530,7 @@ soft, NMR: gradients of a different image (blurred, or hard with NMR's approxima
 
 def bench_gradients(scenes=DEFAULT_SCENES, weights=WEIGHTS, repeat: int = REPEAT, samples=SAMPLES, sigmas=SIGMAS,
                     steps=None, fd_vertices: int = FD_VERTICES, plot: str | None = "gradients_pareto.png",
-                    vs=None, mitsuba_spp=MITSUBA_SPP, out=print) -> list[dict]:
+                    vs=None, mitsuba_spp=MITSUBA_SPP, out=print, warp_samples=WARP_SAMPLES) -> list[dict]:
     """Every method on every scene and kind of weights: prints the table and the note, writes the plot;
     returns the rows (dicts: scene, weights, method, family, param, dtype, ms, x_exact, rel, cos, abs, note)."""
     m = None
@@ -533,7 +539,7 @@ def bench_gradients(scenes=DEFAULT_SCENES, weights=WEIGHTS, repeat: int = REPEAT
         if m is not None and not _mitsuba_geometry_check(m, out):
             m = None
     rows = []
-    specs = method_specs(steps, samples, sigmas)
+    specs = method_specs(steps, samples, sigmas, warp_samples=warp_samples)
     for name in scenes:
         sc = make_scene(name)
         missing = _model_missing(sc["model"])
@@ -560,6 +566,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--full", action="store_true", help="every scene, S1 at 512² included (minutes)")
     parser.add_argument("--weights", nargs="+", choices=WEIGHTS, default=list(WEIGHTS), help="kinds of weights")
     parser.add_argument("--samples", nargs="+", type=int, default=list(SAMPLES), help="edge-sampling sample counts")
+    parser.add_argument("--warp-samples", nargs="+", type=int, default=list(WARP_SAMPLES),
+                        help="reparameterization: samples per pixel that holds a jump")
     parser.add_argument("--sigmas", nargs="+", type=float, default=list(SIGMAS), help="soft rasterization σ (NDC)")
     parser.add_argument("--fd-vertices", type=int, default=FD_VERTICES,
                         help=f"finite differences on meshes of more than {FD_ALL_VERTICES} vertices: this many "
@@ -573,4 +581,4 @@ def add_arguments(parser) -> None:
 def run(args) -> list[dict]:
     scenes = SCENES if args.full else (args.scenes or DEFAULT_SCENES)
     return bench_gradients(scenes, args.weights, args.repeat, args.samples, args.sigmas, None, args.fd_vertices,
-                           args.plot or None, args.vs, args.mitsuba_spp)
+                           args.plot or None, args.vs, args.mitsuba_spp, warp_samples=args.warp_samples)
