@@ -1,4 +1,4 @@
-"""Texture statistics without a pretrained network, and the style images to match (lecture 11, to come).
+"""Texture statistics without a pretrained network, and the style images to match (lecture 11).
 
 Gatys, Ecker and Bethge (2016) describe the *style* of an image by the Gram matrices of a convolutional
 network's feature maps: which features fire together, averaged over every position, so the arrangement is
@@ -91,10 +91,11 @@ class RandomFeatures(torch.nn.Module):
             w = w / w.flatten(1).norm(dim=1)[:, None, None, None]
             self.register_buffer(f"filters_{s}", w.to(dtype))
 
-    def forward(self, image) -> list:
+    def features(self, image) -> list:
+        """The filter responses (1, channels, H_l, W_l) of every (scale, size) block, scale by scale: the
+        maps whose Gram matrices ``forward`` returns (after the colour block)."""
         x = _check_image(image).to(getattr(self, f"filters_{self.sizes[0]}").dtype)
-        colour = torch.cat([x[0], torch.ones_like(x[0, :1])])                 # (4, H, W): RGB and a constant
-        grams = [gram_matrix(colour)]                                       # mean colour and its covariance
+        maps = []
         for level in range(self.scales):
             if level:
                 if min(x.shape[-2:]) < 2 * (max(self.sizes) // 2 + 1):     # the next level wraps its filters
@@ -104,9 +105,24 @@ class RandomFeatures(torch.nn.Module):
             for s in self.sizes:
                 w = getattr(self, f"filters_{s}")
                 wrapped = torch.nn.functional.pad(x - 0.5, (s // 2,) * 4, mode="circular")   # a texture tiles
-                f = torch.relu(torch.nn.functional.conv2d(wrapped, w))
-                grams.append(gram_matrix(f))
-        return grams
+                maps.append(torch.relu(torch.nn.functional.conv2d(wrapped, w)))
+        return maps
+
+    def forward(self, image) -> list:
+        x = _check_image(image).to(getattr(self, f"filters_{self.sizes[0]}").dtype)
+        colour = torch.cat([x[0], torch.ones_like(x[0, :1])])                 # (4, H, W): RGB and a constant
+        return [gram_matrix(colour)] + [gram_matrix(f) for f in self.features(image)]
+
+    def activation(self, image, block: int, channels) -> torch.Tensor:
+        """DeepDream's objective: the mean over positions of the squared responses of ``channels`` (a list of
+        filter indices) in feature block ``block`` (0 .. scales · len(sizes) - 1, as ``features``)."""
+        maps = self.features(image)
+        if not 0 <= int(block) < len(maps):
+            raise ValueError(f"block must be in [0, {len(maps)}), got {block!r}")
+        idx = torch.as_tensor(list(channels), dtype=torch.long)
+        if idx.numel() == 0 or idx.min() < 0 or idx.max() >= self.channels:
+            raise ValueError(f"channels must be filter indices in [0, {self.channels}), got {list(channels)}")
+        return (maps[int(block)][0, idx] ** 2).mean()
 
 
 def synthesize_texture(style, size=(64, 64), steps: int = 300, *, seed: int = 0, lr: float = 0.2,
