@@ -2,10 +2,11 @@
 
 A mesh's vertices and texture are optimised so that images of it, rendered from random views, have the
 *texture statistics* of a 2D style image (``course.style``: Gram matrices of seeded random filters), while a
-content term keeps the shape and a total-variation term keeps the texture clean:
+content term keeps the shape, a smoothness term keeps its changes smooth, and a total-variation term keeps the
+texture clean:
 
     L = Σ_views style_loss(G(render(v, T; view)), G(style)) / views + λ_content mean ‖v - v₀‖² / r²
-        + λ_tv TV(T),
+        + λ_smooth mean_edges ‖(v - v₀)_i - (v - v₀)_j‖² / ℓ² + λ_tv TV(T),
 
 with the colour block of the Gram matrices weighted up (``colour_weight``). DeepDream (``deep_dream_mesh``)
 drops the style image: it *maximises* how strongly chosen random filters respond to the rendered images, so
@@ -38,7 +39,7 @@ from .tensors import _check_count, _check_real
 from .textures import sample_texture
 
 __all__ = ["random_directions", "view_camera", "render_texture", "stylize_mesh", "deep_dream_mesh", "StyleRun",
-           "RENDERERS"]
+           "held_out_style_loss", "outline_change", "RENDERERS"]
 
 RENDERERS = ("soft", "hard")
 
@@ -124,7 +125,7 @@ def _setup(mesh, steps, views, size, seed, renderer, dtype):
 
 def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64, renderer: str = "soft",
                  texture_size: int = 64, colour_weight: float = 10.0, content_weight: float = 20.0,
-                 tv_weight: float = 4.0, lr_verts: float = 0.001, lr_texture: float = 0.1, geometry: bool = True,
+                 smooth_weight: float = 10.0, tv_weight: float = 4.0, lr_verts: float = 0.001, lr_texture: float = 0.1, geometry: bool = True,
                  seed: int = 0, network: RandomFeatures | None = None, snapshot_every: int | None = None,
                  progress: bool = False, dtype=torch.float64) -> StyleRun:
     """Kato et al.'s 2D-to-3D style transfer: vertex offsets and a texture (``texture_size``², from mid-grey,
@@ -133,7 +134,9 @@ def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64
 
     colour_weight: how much more the colour block (mean colour and covariance) counts than each filter block
     (random filters reward contrast, and alone drive the colours to saturation); content_weight: on the mean
-    squared vertex offset relative to the mesh's radius (keeps the shape); tv_weight: on the texture's total
+    squared vertex offset relative to the mesh's radius (keeps the shape); smooth_weight: on the mean squared
+    difference of neighbouring vertices' offsets relative to the mean edge length (the offsets vary smoothly:
+    the shape bends rather than crumples); tv_weight: on the texture's total
     variation (mean squared difference of neighbouring texels); geometry: False optimises the texture only.
     The background is the style image's mean colour (it is part of every rendered image's statistics).
     Returns a ``StyleRun`` (``losses``: the style term of each step, colour block weighted, averaged over
@@ -148,6 +151,8 @@ def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64
     T = _check_count(texture_size, "texture_size")
     offsets = torch.zeros_like(verts0, requires_grad=True)
     logits = torch.zeros(T, T, 3, dtype=dtype, requires_grad=True)         # sigmoid(0) = mid-grey
+    edges = _edges(faces)
+    spacing = float((verts0[edges[:, 0]] - verts0[edges[:, 1]]).norm(dim=1).mean())   # the mean edge length
     groups = [{"params": [logits], "lr": lr_texture}]
     if geometry:
         groups.append({"params": [offsets], "lr": lr_verts})
@@ -164,8 +169,9 @@ def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64
             grams = net(image)
             s = s + (colour_weight * style_loss(grams[:1], target[:1]) + style_loss(grams[1:], target[1:])) / views
         content = (offsets ** 2).sum(1).mean() / radius ** 2
+        bend = ((offsets[edges[:, 0]] - offsets[edges[:, 1]]) ** 2).sum(1).mean() / spacing ** 2
         tv = ((texture[1:] - texture[:-1]) ** 2).mean() + ((texture[:, 1:] - texture[:, :-1]) ** 2).mean()
-        loss = s + content_weight * content + tv_weight * tv
+        loss = s + content_weight * content + smooth_weight * bend + tv_weight * tv
         loss.backward()
         opt.step()
         losses.append(float(s.detach()))
@@ -220,6 +226,52 @@ def deep_dream_mesh(mesh, *, steps: int = 40, views: int = 2, size: int = 64, re
         bar.update(1)
     bar.close()
     return StyleRun((verts0 + offsets).detach(), torch.sigmoid(logits).detach(), torch.tensor(acts))
+
+
+def held_out_style_loss(mesh, run: StyleRun, style, *, views: int = 8, size: int = 64, seed: int = 123,
+                        renderer: str = "hard", colour_weight: float = 10.0,
+                        network: RandomFeatures | None = None) -> float:
+    """How well a run's result has the style, judged the same way whatever renderer trained it: the style term
+    (colour block weighted as in ``stylize_mesh``) of renders by ``renderer`` (the judge: "hard", the z-buffer,
+    or "soft") from ``views`` directions of a generator seeded ``seed`` (not the training views), averaged.
+    A judge favours results trained through the same renderer (their images are what was optimised): compare
+    runs under both. mesh: the mesh the run started from (faces and uvs); network: the run's (seeded 0 when
+    None, as ``stylize_mesh``'s default)."""
+    net = network if network is not None else RandomFeatures(channels=32, seed=0, dtype=run.verts.dtype)
+    style = _check_image(style, "style")[0].permute(1, 2, 0).to(run.verts.dtype)
+    faces, uvs = torch.as_tensor(mesh.faces).long(), mesh.uvs.to(run.verts.dtype)
+    center = (run.verts.max(0).values + run.verts.min(0).values) / 2
+    radius = float((run.verts - center).norm(dim=1).max())
+    with torch.no_grad():
+        target = net(style)
+        total = 0.0
+        for d in random_directions(views, torch.Generator().manual_seed(int(seed)), dtype=run.verts.dtype):
+            cam = view_camera(d, center, 3.2 * radius, size, dtype=run.verts.dtype)
+            image = render_texture(run.verts, faces, uvs, run.texture, cam, renderer=renderer,
+                                   background=style.reshape(-1, 3).mean(0))
+            g = net(image)
+            total += float(colour_weight * style_loss(g[:1], target[:1]) + style_loss(g[1:], target[1:]))
+    return total / views
+
+
+def outline_change(faces, verts0, verts, cameras) -> float:
+    """How much the outline moved: ``1 - IoU`` of the z-buffer's silhouettes of ``verts`` and ``verts0``, summed
+    over ``cameras``."""
+    faces = torch.as_tensor(faces).long()
+    total = 0.0
+    with torch.no_grad():
+        for cam in cameras:
+            a = rasterize(Mesh(verts, faces), cam).mask
+            b = rasterize(Mesh(verts0, faces), cam).mask
+            union = float((a | b).sum())
+            total += 1 - float((a & b).sum()) / union if union else 0.0
+    return total
+
+
+def _edges(faces):
+    """(E, 2) the mesh's edges, each once."""
+    e = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return torch.unique(torch.sort(e, dim=1).values, dim=0)
 
 
 class _NoBar:

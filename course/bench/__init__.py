@@ -20,6 +20,8 @@
   Reynolds, reparameterization, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
   error, a table and a Pareto plot.
 * ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
+* ``style`` (``course.bench.style``): lecture 11's style transfer (soft, texture only, hard) and DeepDream at
+  full size: time, style loss on held-out views, how far the outline moved.
 * ``kernels`` (``course.bench.kernels``): the compiled kernels' cold start, compile and cache-load times.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
@@ -37,7 +39,7 @@ import os
 
 import torch
 
-from . import aa, fit, gradients, kernels, precision, raster, raytrace, shadows, skips, soft
+from . import aa, fit, gradients, kernels, precision, raster, raytrace, shadows, skips, soft, style
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -47,7 +49,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
-           "kernels": kernels}
+           "kernels": kernels, "style": style}
 
 
 def cli(argv) -> int:
