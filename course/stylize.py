@@ -70,10 +70,11 @@ def render_texture(verts, faces, uvs, texture, camera, *, renderer="soft", backg
     """(H, W, 3) image of the mesh with a texture (T, T', 3) looked up at the interpolated uvs (V, 2).
 
     ``"soft"``: soft rasterization of (u, v, 1) as vertex colours over a black background gives α (the third
-    channel, the soft coverage) and α × the blended uv; the texture is sampled (``textures.sample_texture``, bilinear) at uv / α and
-    composited over the background with α: differentiable in the vertices (through α and uv) and the
-    texture. ``"hard"``: the z-buffer's uvs (``rasterize`` + ``interpolate``) and its mask: differentiable in the
-    texture, and in the vertices only through the uvs inside each face (no silhouette moves)."""
+    channel, the soft coverage) and α × the blended uv; the texture is sampled (``textures.sample_texture``,
+    bilinear) at uv / α and composited over the background with α: differentiable in the vertices (through α
+    and uv) and the texture. ``"hard"``: the z-buffer's uvs (``rasterize`` + ``interpolate``) and its mask:
+    differentiable in the texture, and in the vertices only through the uvs inside each face (the texture slides
+    under the pixels; no silhouette or occlusion edge is moved on purpose)."""
     mesh = Mesh(verts, faces)
     bg = torch.as_tensor(background, dtype=verts.dtype)
     if renderer == "soft":
@@ -125,8 +126,9 @@ def _setup(mesh, steps, views, size, seed, renderer, dtype):
 
 def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64, renderer: str = "soft",
                  texture_size: int = 64, colour_weight: float = 10.0, content_weight: float = 20.0,
-                 smooth_weight: float = 10.0, tv_weight: float = 4.0, lr_verts: float = 0.001, lr_texture: float = 0.1, geometry: bool = True,
-                 seed: int = 0, network: RandomFeatures | None = None, snapshot_every: int | None = None,
+                 smooth_weight: float = 10.0, tv_weight: float = 4.0, lr_verts: float = 0.001,
+                 lr_texture: float = 0.1, geometry: bool = True, seed: int = 0,
+                 network: RandomFeatures | None = None, snapshot_every: int | None = None,
                  progress: bool = False, dtype=torch.float64) -> StyleRun:
     """Kato et al.'s 2D-to-3D style transfer: vertex offsets and a texture (``texture_size``², from mid-grey,
     on the mesh's uvs) by Adam, so that ``views`` random views per step match ``style`` (H, W, 3)'s

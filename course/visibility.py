@@ -43,13 +43,15 @@ piece's area times the colour at its centroid). With affine colours the interior
 fixed pieces (``boundary._interior``), and the boundary integrand is the product of two linear functions along a
 piece: exact with ``order=2``, not with 1.
 
-What "equal" covers. ``exact``, ``reynolds`` (and the means of ``edge_sampling`` and ``reparameterization``) compute the same number,
-to rounding (about 1e-12 relative in float64), on every scene the tests know: meshes closed or open, faces
-that pass through each other (the crossing ending on an open boundary, at a corner, or through a shared
-vertex), faces clipped by the near plane, seams, and scenes with kinks: where a line of the scene lies exactly
-on a pixel border or a vertex on a pixel corner, each pixel's derivative depends on the direction of the
-motion, and every method returns the one-sided derivative for the scene moving a hair toward +x, +y on screen
-(the half-open pixels [j, j+1) of the conventions). ``finite_differences`` agree with them where the image is
+What "equal" covers. ``exact``, ``reynolds`` (and the means of ``edge_sampling`` and ``reparameterization``)
+compute the same number, to rounding (about 1e-12 relative in float64), on every scene the tests know: meshes
+closed or open, faces that pass through each other (the crossing ending on an open boundary, at a corner, or
+through a shared vertex), faces clipped by the near plane, seams, and scenes with kinks: where a line of the
+scene lies exactly on a pixel border or a vertex on a pixel corner, each pixel's derivative depends on the
+direction of the motion, and every boundary method returns the one-sided derivative for the scene moving a hair
+toward +x, +y on screen (the half-open pixels [j, j+1) of the conventions). Reparameterization is not made for
+kinks (its warp holds every pixel's border still, and a jump lying along the border cannot be followed there):
+its tests use scenes without them. ``finite_differences`` agree with them where the image is
 differentiable, to their own error (about 1e-9 relative at step 1e-5 in float64); at a kink central
 differences return the average of the two sides. A float32 problem gets the float64 answer of its float32
 numbers from the boundary methods; ``exact`` cuts its pieces in float32 (about 1e-6 relative). They are not
@@ -336,7 +338,8 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
     reynolds: ``order`` (Gauss points per pixel piece of edge, 1); edge_sampling: ``samples`` (1000),
     ``generator`` or ``seed``; reparameterization: ``samples`` (per pixel, 16), ``kernel`` (pixels, 1.0; None:
-    no limit), ``warp`` ("harmonic" / "nearest"), ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma`` (1e-4), ``threshold``; nmr: ``reach``.
+    no limit), ``warp`` ("harmonic" / "nearest"), ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma``
+    (1e-4), ``threshold``; nmr: ``reach``.
     """
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")

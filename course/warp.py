@@ -79,7 +79,7 @@ def _stratified(pixels, samples, generator):
     grid (k = ⌈√samples⌉, the cells drawn at random), uniform in its cell: each point is uniform on the
     square (unbiased), and together they spread out (less variance than independent points)."""
     k = math.isqrt(samples - 1) + 1
-    cells = torch.rand(pixels, k * k, generator=generator).argsort(1)[:, :samples].reshape(-1)
+    cells = torch.rand(pixels, k * k, generator=generator, dtype=torch.float64).argsort(1)[:, :samples].reshape(-1)
     cell = torch.stack([cells % k, torch.div(cells, k, rounding_mode="floor")], 1).double()
     return (cell + torch.rand(cells.numel(), 2, dtype=torch.float64, generator=generator)) / k
 
@@ -134,7 +134,7 @@ def warp_field(y, pixel, width, a, b, s0, s1, piece_pixel, velocity, divergence,
 
 def warp_gradient(prob, names, *, samples=16, kernel=1.0, warp="harmonic", generator=None):
     """dL/dπ for ``names`` (not "colors") by warped-area sampling (module docstring): ``samples`` points per
-    pixel, uniform, from ``generator``; the surrogate ``Σ w (f(y + D(y, π); π) - bg) (1 + ∇·D(y, π)) / samples``
+    pixel, stratified (``_stratified``), from ``generator``; the surrogate ``Σ w (f(y + D(y, π); π) - bg) (1 + ∇·D(y, π)) / samples``
     with D the warp's displacement (0 at π, its derivative V), differentiated by autograd."""
     p = prob.leaves(names)
     targets = prob.targets(p, names)

@@ -17,8 +17,8 @@
 * ``soft`` (``course.bench.soft``): the hard rasterizer, NMR's approximate gradient and soft rasterization
   (σ, γ, threshold) on S4: forward and forward+backward time, image error to the exact box-filtered image.
 * ``gradients`` (``course.bench.gradients``): visibility gradients (finite differences, edge sampling,
-  Reynolds, reparameterization, soft, NMR; optionally Mitsuba's projective sampling) against the exact gradient: time against
-  error, a table and a Pareto plot.
+  Reynolds, reparameterization, soft, NMR; optionally Mitsuba's projective sampling) against the exact
+  gradient: time against error, a table and a Pareto plot.
 * ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
 * ``style`` (``course.bench.style``): lecture 11's style transfer (soft, texture only, hard) and DeepDream at
   full size: time, style loss on held-out views, how far the outline moved.

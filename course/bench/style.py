@@ -12,9 +12,10 @@ Lecture 11's runs at full size: ``course.stylize.stylize_mesh`` on ``models.teap
 and ``deep_dream_mesh`` (soft, 100 steps). Reported per run: wall time, the training style term (mean of the
 last 10 steps: each run's own renderer, so not comparable across renderers), the **held-out style loss**
 (``held_out_style_loss`` from 8 other directions, judged by z-buffer renders and by soft ones: a judge favours
-the runs trained through its own renderer; lower is more stylish), the **outline change** (``outline_change``: 1 - IoU of the z-buffer silhouettes of the result and the
-start, summed over those 8 views) and the largest vertex offset (the teapot's radius is 1). One run each, seed 0:
-a single seed, so differences of a few percent in the held-out loss are within what another seed would move.
+the runs trained through its own renderer; lower is more stylish), the **outline change** (``outline_change``:
+1 - IoU of the z-buffer silhouettes of the result and the start, summed over those 8 views) and the largest
+vertex offset (the teapot's radius is 1). One run each, seed 0: a single seed, so differences of a few percent
+in the held-out loss are within what another seed would move.
 ``--figure PNG`` saves the style image and the soft run's teapot from three views (the README's picture).
 ``--fast`` runs everything small (to check that the command works; its numbers are not the course's).
 """
@@ -32,7 +33,8 @@ from ..stylize import (deep_dream_mesh, held_out_style_loss, outline_change, ran
 __all__ = ["bench_style", "format_table", "save_style_picture", "add_arguments", "run"]
 
 REPEAT = 1
-DESCRIPTION = "lecture 11's style transfer and DeepDream at full size: time, style loss on held-out views, outline change"
+DESCRIPTION = ("lecture 11's style transfer and DeepDream at full size: time, style loss on held-out views, "
+               "outline change")
 
 
 def bench_style(steps: int = 300, size: int = 128, views: int = 2, resolution: int = 8, dream_steps: int = 100,

@@ -19,8 +19,8 @@ notebooks, tests and the command line use.
 from .helpers import Fail, compare, generator, grade_parts, require, summarize_exception, to_tensor
 from .registry import (DEFAULT_TIMEOUT, TASKS, CheckTimeout, Result, Task, check, format_result, run_check, task,
                        tasks_for_lecture)
-from . import lecture01, lecture02, lecture03, lecture04, lecture05, lecture06, lecture07, lecture08, lecture09  # noqa: F401
-from . import lecture10, lecture11  # noqa: F401  (importing them registers every task)
+from . import lecture01, lecture02, lecture03, lecture04, lecture05, lecture06  # noqa: F401  (importing them
+from . import lecture07, lecture08, lecture09, lecture10, lecture11  # noqa: F401   registers every task)
 from .grader import cli, grade_notebook
 from .registry import _explain_undefined_task_functions
 

@@ -337,7 +337,8 @@ def _dream_problem(impl, label, x, objective, step):
     if not torch.equal(x, before):
         return f"{name}: x was changed in place: return a new tensor and leave x as it was"
     if isinstance(raw, torch.Tensor) and raw.requires_grad:
-        return f"{name}: the result still requires grad: return it detached (x + ... computed under no_grad, or .detach())"
+        return (f"{name}: the result still requires grad: return it detached (x + ... computed under no_grad, or "
+                ".detach())")
     expected = _dream(x, objective, step)
     message = compare(out, expected, name=name, check_dtype=True, atol=1e-12, rtol=1e-10)
     if message is None or "dtype" in message or "shape" in message:
