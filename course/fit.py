@@ -259,7 +259,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
                     sigma: float = 3e-4, sigma_end: float | None = 3e-5, lr_end: float = 1.0,
                     seed: int = 0, start=None, subdivisions: int = 3,
                     radius: float = 0.5, held_out=None, snapshot_every: int | None = 10,
-                    progress: bool = True) -> SilhouetteFit:
+                    progress: bool = True, optimizer: str = "adam", lam: float = 20.0) -> SilhouetteFit:
     """Deform a sphere so that its silhouettes from ``cameras`` match those of ``target_mesh``.
 
     Args:
@@ -282,6 +282,8 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         held_out: cameras for the metric, or None for ``sphere_views(16)`` at the training image size.
         snapshot_every: keep the vertices every this many steps (and the last); None: none.
         progress: show a tqdm bar (``TQDM_DISABLE=1`` also hides it).
+        optimizer: ``"adam"`` (Adam on a per-vertex offset) or ``"large_steps"`` (Nicolet et al.: the vertices
+            as u = (I + λL) v, stepped by ``large_steps.UniformAdam`` with learning rate ``lr``; ``lam`` is λ).
 
     Returns a ``SilhouetteFit``; ``history.loss`` has ``steps`` entries, ``history.metrics["iou_loss"]`` the
     silhouette term alone.
@@ -312,8 +314,17 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
     base, faces = start_verts(start, seed)
     base = base.to(dtype)
     targets = hard_silhouettes(target_mesh, cameras).to(dtype)              # (N, H, W)
-    offset = torch.zeros_like(base, requires_grad=True)
-    opt = torch.optim.Adam([offset], lr=lr)
+    if optimizer not in ("adam", "large_steps"):
+        raise ValueError(f'optimizer must be "adam" or "large_steps", got {optimizer!r}')
+    if optimizer == "large_steps":
+        from .large_steps import Parameterization, UniformAdam
+        param = Parameterization(base, faces, lam)
+        opt = UniformAdam([param.u], lr=lr)
+        current = param.verts
+    else:
+        offset = torch.zeros_like(base, requires_grad=True)
+        opt = torch.optim.Adam([offset], lr=lr)
+        current = lambda: base + offset                                     # noqa: E731
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_end ** (1 / max(steps, 1)))
     sigmas = _schedule(sigma, sigma_end, steps)
     history = FitHistory(metrics={"iou_loss": []})
@@ -321,7 +332,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
 
     bar = _progress(steps, progress, f"fit_silhouettes ({method})")
     for step in range(steps + 1):
-        verts = base + offset
+        verts = current()
         if _snap_due(step, steps, snapshot_every):
             history.snapshot_steps.append(step)
             history.snapshots.append(verts.detach().clone())
@@ -346,7 +357,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         bar.update(1)
         bar.set_postfix(loss=f"{history.loss[-1]:.4f}")
     bar.close()
-    fitted = Mesh((base + offset).detach(), faces)
+    fitted = Mesh(current().detach(), faces)
     per_view = held_out_iou(fitted, target_mesh, held_out)
     return SilhouetteFit(fitted, history, float(start_iou), float(per_view.mean()), per_view)
 

@@ -56,10 +56,12 @@ def test_fast_mesh_views_and_texture_rows():
     rows = fb.bench_fit(["mesh", "views", "texture"], fast=True, out=lines.append)
     check_rows(rows)
     mesh = [r for r in rows if r["application"] == "mesh"]
+    metrics = ("held-out IoU", "self-intersections", "Chamfer (of the diagonal)", "normal consistency")
     assert [(r["method"], r["metric"]) for r in mesh] == [
-        (m, metric) for m in ("soft", "soft, smoothness=0") for metric in ("held-out IoU", "self-intersections")]
-    assert mesh[0]["start"] == mesh[2]["start"]                             # one seed, one start
+        (m, metric) for m in ("soft", "soft, smoothness=0", "soft, large steps") for metric in metrics]
+    assert mesh[0]["start"] == mesh[4]["start"] == mesh[8]["start"]         # one seed, one start
     assert mesh[1]["start"] == 0 and mesh[1]["unit"] == "pairs"             # the start sphere is embedded
+    assert mesh[2]["unit"] == "%" and mesh[2]["start"] > 1 and 0 < mesh[3]["start"] <= 1
     assert all(0 <= r["final"] <= 1 for r in rows if r["metric"] == "held-out IoU")
     assert [r["method"] for r in rows if r["application"] == "views"] == ["ring (fixed)", "learned views"]
     texture = [r for r in rows if r["application"] == "texture"]
