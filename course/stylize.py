@@ -193,7 +193,7 @@ def deep_dream_mesh(mesh, *, steps: int = 40, views: int = 2, size: int = 64, re
     views per step. Each step moves the texture's logits along the gradient divided by its mean absolute
     value, a step of fixed size whatever the gradient's scale (Mordvintsev et al.'s normalisation), and with
     ``geometry`` the vertices along the gradient divided by its largest entry, times ``step_size`` × radius / 10
-    (no vertex moves further than that in one step). texture: the start texture (T, T', 3) in (0, 1)
+    (no coordinate moves further than that in one step: radius / 200 by default). texture: the start texture (T, T', 3) in (0, 1)
     (default: ``texture_size``² of mid-grey with seeded noise of σ 0.05: a flat image excites no
     zero-mean filter, so its gradient would be 0). Returns a ``StyleRun`` whose ``losses`` are the activations."""
     steps, views, size, verts0, faces, uvs, center, radius, gen = _setup(mesh, steps, views, size, seed, renderer,
@@ -222,7 +222,7 @@ def deep_dream_mesh(mesh, *, steps: int = 40, views: int = 2, size: int = 64, re
         with torch.no_grad():                                               # ascent, normalised steps
             if grads[0] is not None:                                        # texture: g / mean |g|
                 logits += step_size * grads[0] / grads[0].abs().mean().clamp_min(1e-12)
-            if geometry and grads[1] is not None:                           # vertices: at most radius / 500
+            if geometry and grads[1] is not None:                           # each coordinate: radius / 200
                 offsets += step_size * radius / 10 * grads[1] / grads[1].abs().max().clamp_min(1e-12)
         acts.append(float(a.detach()))
         bar.update(1)
