@@ -71,38 +71,35 @@ def _nearest(x, y):
     return torch.cat(index), torch.cat(dist)
 
 
-def _pairs(pred, target, samples, seed):
+def _metrics(pred, target, samples, seed):
+    """Chamfer (fraction of the target's diagonal) and normal consistency from one set of samples."""
     p, pn = sample_surface(pred, samples, torch.Generator().manual_seed(int(seed)))
     t, tn = sample_surface(target, samples, torch.Generator().manual_seed(int(seed)))
     i, d_pt = _nearest(p, t)
     j, d_tp = _nearest(t, p)
-    return (p, pn, t, tn), (i, d_pt), (j, d_tp)
-
-
-def _diagonal(mesh):
-    verts, _ = _mesh_arrays(mesh, "target")
-    return float((verts.max(0).values - verts.min(0).values).norm())
+    verts, _ = _mesh_arrays(target, "target")
+    diagonal = float((verts.max(0).values - verts.min(0).values).norm())
+    chamfer = float((d_pt.mean() + d_tp.mean()) / 2) / diagonal
+    normals = float(((pn * tn[i]).sum(1).abs().mean() + (tn * pn[j]).sum(1).abs().mean()) / 2)
+    return chamfer, normals
 
 
 def chamfer_distance(pred, target, *, samples: int = 20000, seed: int = 0) -> float:
     """Symmetric Chamfer distance between surface samples, as a fraction of the target's bounding-box
     diagonal: ``(mean_p min_t |p - t| + mean_t min_p |t - p|) / 2 / diagonal`` (distances, not squared)."""
-    _, (_, d_pt), (_, d_tp) = _pairs(pred, target, samples, seed)
-    return float((d_pt.mean() + d_tp.mean()) / 2) / _diagonal(target)
+    return _metrics(pred, target, samples, seed)[0]
 
 
 def normal_consistency(pred, target, *, samples: int = 20000, seed: int = 0) -> float:
     """``|n · n'|`` between every sample's face normal and its nearest sample's on the other surface, averaged
     in both directions: 1 for surfaces that face alike everywhere."""
-    (p, pn, t, tn), (i, _), (j, _) = _pairs(pred, target, samples, seed)
-    return float(((pn * tn[i]).sum(1).abs().mean() + (tn * pn[j]).sum(1).abs().mean()) / 2)
+    return _metrics(pred, target, samples, seed)[1]
 
 
 def shape_metrics(pred, target, *, samples: int = 20000, seed: int = 0) -> dict:
     """``chamfer`` (fraction of the target's diagonal), ``normal_consistency`` and ``self_intersections`` (pairs
     of faces of ``pred`` that cross each other), from one set of samples."""
     from .fit import self_intersections
-    (p, pn, t, tn), (i, d_pt), (j, d_tp) = _pairs(pred, target, samples, seed)
-    return dict(chamfer=float((d_pt.mean() + d_tp.mean()) / 2) / _diagonal(target),
-                normal_consistency=float(((pn * tn[i]).sum(1).abs().mean() + (tn * pn[j]).sum(1).abs().mean()) / 2),
+    chamfer, normals = _metrics(pred, target, samples, seed)
+    return dict(chamfer=chamfer, normal_consistency=normals,
                 self_intersections=int(self_intersections(pred).shape[0]))

@@ -94,7 +94,13 @@ class RandomFeatures(torch.nn.Module):
     def features(self, image) -> list:
         """The filter responses (1, channels, H_l, W_l) of every (scale, size) block, scale by scale: the
         maps whose Gram matrices ``forward`` returns (after the colour block)."""
-        x = _check_image(image).to(getattr(self, f"filters_{self.sizes[0]}").dtype)
+        return self._maps(self._input(image))
+
+    def _input(self, image):
+        """image (H, W, 3), checked, as (1, 3, H, W) in the filters' dtype."""
+        return _check_image(image).to(getattr(self, f"filters_{self.sizes[0]}").dtype)
+
+    def _maps(self, x):
         maps = []
         for level in range(self.scales):
             if level:
@@ -109,9 +115,9 @@ class RandomFeatures(torch.nn.Module):
         return maps
 
     def forward(self, image) -> list:
-        x = _check_image(image).to(getattr(self, f"filters_{self.sizes[0]}").dtype)
+        x = self._input(image)
         colour = torch.cat([x[0], torch.ones_like(x[0, :1])])                 # (4, H, W): RGB and a constant
-        return [gram_matrix(colour)] + [gram_matrix(f) for f in self.features(image)]
+        return [gram_matrix(colour)] + [gram_matrix(f) for f in self._maps(x)]
 
     def activation(self, image, block: int, channels) -> torch.Tensor:
         """DeepDream's objective: the mean over positions of the squared responses of ``channels`` (a list of

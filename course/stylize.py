@@ -59,9 +59,10 @@ def view_camera(direction, center, distance: float, size: int, fov_y: float = 40
     """A camera ``distance`` from ``center`` along ``direction`` (3,), looking at it, image ``size`` x ``size``.
     The up vector is world y, or z for a view straight along y."""
     d = torch.as_tensor(direction, dtype=torch.float64)
+    d = d / d.norm()
     c = torch.as_tensor(center, dtype=torch.float64)
     up = (0.0, 0.0, 1.0) if abs(float(d[1])) > 0.99 else (0.0, 1.0, 0.0)
-    eye = c + distance * d / d.norm()
+    eye = c + distance * d
     return Camera.look_at(eye.tolist(), c.tolist(), up, fov_y=fov_y, width=size, height=size, dtype=dtype)
 
 
@@ -103,6 +104,11 @@ class StyleRun:
 
     def mesh(self, faces) -> Mesh:
         return Mesh(self.verts, faces)
+
+
+def _style_term(grams, target, colour_weight):
+    """The style loss with the colour block (the first) weighted by ``colour_weight``."""
+    return colour_weight * style_loss(grams[:1], target[:1]) + style_loss(grams[1:], target[1:])
 
 
 def _setup(mesh, steps, views, size, seed, renderer, dtype):
@@ -168,8 +174,7 @@ def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64
         for d in random_directions(views, gen):
             cam = view_camera(d, center, 3.2 * radius, size, dtype=dtype)
             image = render_texture(verts, faces, uvs, texture, cam, renderer=renderer, background=background)
-            grams = net(image)
-            s = s + (colour_weight * style_loss(grams[:1], target[:1]) + style_loss(grams[1:], target[1:])) / views
+            s = s + _style_term(net(image), target, colour_weight) / views
         content = (offsets ** 2).sum(1).mean() / radius ** 2
         bend = ((offsets[edges[:, 0]] - offsets[edges[:, 1]]) ** 2).sum(1).mean() / spacing ** 2
         tv = ((texture[1:] - texture[:-1]) ** 2).mean() + ((texture[:, 1:] - texture[:, :-1]) ** 2).mean()
@@ -251,8 +256,7 @@ def held_out_style_loss(mesh, run: StyleRun, style, *, views: int = 8, size: int
             cam = view_camera(d, center, 3.2 * radius, size, dtype=run.verts.dtype)
             image = render_texture(run.verts, faces, uvs, run.texture, cam, renderer=renderer,
                                    background=style.reshape(-1, 3).mean(0))
-            g = net(image)
-            total += float(colour_weight * style_loss(g[:1], target[:1]) + style_loss(g[1:], target[1:]))
+            total += float(_style_term(net(image), target, colour_weight))
     return total / views
 
 

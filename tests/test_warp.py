@@ -118,7 +118,6 @@ def test_colours_are_exact_and_float32_gets_its_float64_answer():
 def test_degenerate_inputs_and_no_jumps():
     """Finite on the degenerate scene of the other methods; zero where nothing jumps (one colour, nothing
     on screen)."""
-    from test_visibility import test_degenerate_inputs_give_finite_gradients as other  # noqa: F401
     v = torch.tensor([[-0.5, -0.4, 0.0], [0.6, -0.3, 0.0], [0.0, 0.5, 0.0],
                       [0.1, 0.1, 0.2], [0.2, 0.2, 0.2], [0.3, 0.3, 0.2],
                       [0.0, -0.2, 0.1], [0.0, 0.3, 0.1], [0.0, 0.0, 0.6],
