@@ -72,13 +72,20 @@ def test_fast_mesh_views_and_texture_rows():
     assert lines[-1].startswith("| application")
 
 
-def test_fit_picture(tmp_path):
-    """--figure: the mesh fit's target / start / result picture is written."""
+def test_fast_images_rows_and_picture(tmp_path):
+    """The mesh from images: five fits, five metrics each, each fit's start its own (the hull, or the sphere);
+    --figure writes the README's picture (two rows of three)."""
     lines = []
-    fb.bench_fit(["mesh"], fast=True, out=lines.append, figure=str(tmp_path / "fit.png"))
+    rows = fb.bench_fit(["images"], fast=True, out=lines.append, figure=str(tmp_path / "fit.png"))
+    check_rows(rows)
+    metrics = ("held-out IoU", "held-out PSNR", "self-intersections", "Chamfer (of the diagonal)", "normal consistency")
+    assert [(r["method"], r["metric"]) for r in rows] == [(label, m) for label, _ in fb.IMAGE_FITS for m in metrics]
+    hull = [r["start"] for r in rows if r["metric"] == "Chamfer (of the diagonal)"]
+    assert hull[0] == hull[1] == hull[2] == hull[4] == hull[5] != hull[3]   # the sphere starts elsewhere
+    assert rows[0]["target"] == 0.96 and all(r["steps"] <= 3 for r in rows)
     from PIL import Image
     with Image.open(tmp_path / "fit.png") as im:
-        assert im.size[0] > 2 * im.size[1] > 0
+        assert im.size[0] > im.size[1] > 0
     assert f"wrote {tmp_path / 'fit.png'}" in lines
 
 
