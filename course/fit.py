@@ -480,16 +480,17 @@ def fit_mesh_from_images(target_mesh, *, n_views: int = 12, seed: int = 0, size:
        colours recomputed from the current normals every step (so shading moves the surface). ``gradient``:
        ``"soft"``, soft rasterization (sharpness ``sigma`` → ``sigma_end`` geometrically, depth softmax
        ``gamma``), or ``"reynolds"``: the exact box-filtered image and lecture 09's boundary gradient
-       (``_reynolds_backward``; no blur, about 35 times the cost of a soft step). ``optimizer``: ``"large_steps"``
+       (``_reynolds_backward``; no blur, about 20 times the cost of a soft step). ``optimizer``: ``"large_steps"``
        (``large_steps.Parameterization`` with λ = ``lam`` and ``UniformAdam``, learning rate ``lr``) or
        ``"adam"`` (Adam on a per-vertex offset, learning rate ``lr``).
 
     The defaults (λ = 10; λ = 3 and 30 end at the same Chamfer distance and normal consistency to 0.002
-    points of percent and 0.001, the larger fitting the images less closely) reach, on ``models.teapot()`` at 64², Chamfer < 0.5 % of the
-    diagonal, normal consistency > 0.95 and held-out IoU > 0.96 with no self-intersections in under a minute
-    (``python -m course bench fit --only images``). held_out: cameras for the metrics (None: ``sphere_views(16)``
-    at ``size``). seed: the sphere start's jitter (``start_verts``; the hull is used as carved). resolution: the
-    carving grid's points a side; subdivisions: the sphere's. Returns an ``ImageFit``.
+    points of percent and 0.001, the larger fitting the images less closely) reach, on ``models.teapot()`` at
+    64², Chamfer < 0.5 % of the diagonal, normal consistency > 0.95 and held-out IoU > 0.96 with no
+    self-intersections in about a minute (``python -m course bench fit --only images``). held_out: cameras for
+    the metrics (None: ``sphere_views(16)`` at ``size``). seed: the sphere start's jitter (``start_verts``; the
+    hull is used as carved). resolution: the carving grid's points a side; subdivisions: the sphere's.
+    Returns an ``ImageFit``.
     """
     from . import carve, large_steps
     _check_common(steps, lr, "soft", snapshot_every)
