@@ -25,7 +25,8 @@ occlusion, intersections, material changes; every edge under flat shading), and 
 when no pixel needs them. Textures are filtered by mipmaps (``texture_filter="trilinear"``), which
 supersampling alone does not replace. Shadows (lectures 06-07) come from shadow maps or shadow rays
 (``shadows="map"`` / ``"rays"``), and differentiable visibility (lecture 08) from ``visibility="nmr"`` (the
-same image with NMR's gradient) or ``"soft"`` (soft rasterization of per-vertex or per-face colours).
+same image with NMR's gradient) or ``"soft"`` (soft rasterization of per-vertex or per-face colours, and
+of a texture read per pixel and face).
 The scene helpers ``frame_camera`` and ``default_lights`` live in ``course.framing``; the command line in
 ``course.render_cli``.
 """
@@ -159,9 +160,14 @@ class RenderSettings:
     image, with the Neural 3D Mesh Renderer's approximate gradient for vertex positions and the camera) or
     ``"soft"`` (soft rasterization, ``sigma`` / ``gamma`` / ``soft_threshold`` as in ``soft.soft_rasterize``: a
     blurred image, smooth in every vertex). Soft rasterization shades at the vertices (``"phong"`` and
-    ``"gouraud"`` both give Gouraud shading) or per face (``"flat"``) and blends those colours; it draws
-    ``"phong"``, ``"gouraud"``, ``"flat"``, ``"unlit"`` and ``"silhouette"``, without textures, shadows,
-    antialiasing or a wireframe (a clear error says so). NMR needs ``antialias="none"``.
+    ``"gouraud"`` both give Gouraud shading) or per face (``"flat"``) and blends those colours; a one-mesh
+    scene's texture is read per pixel and blended face (bilinearly, at the pixel's perspective-correct
+    barycentrics in the face, as SoftRas does) and multiplied by that lighting. It draws ``"phong"``,
+    ``"gouraud"``, ``"flat"``, ``"unlit"`` and ``"silhouette"``, without shadows, antialiasing or a wireframe
+    (a clear error says so). ``soft_blend``: how the soft image meets the background, ``"softmax"`` (the
+    paper: the background is one more term of the depth softmax) or ``"alpha"`` (the faces' softmax
+    composited over the background by the soft silhouette: no fattening at small γ; ``soft.soft_rasterize``'s
+    ``blend``). NMR needs ``antialias="none"``.
     """
     shading: str = "phong"
     texture_filter: str = "bilinear"
@@ -185,6 +191,7 @@ class RenderSettings:
     sigma: float = 1e-4
     gamma: float = 1e-4
     soft_threshold: float = 1e-4
+    soft_blend: str = "softmax"
 
     def __post_init__(self):
         for name in ("textures", "wireframe", "cull_backfaces", "clamp", "return_depth", "return_normals",
@@ -224,6 +231,8 @@ class RenderSettings:
                              f"got {self.visibility!r}")
         for name in ("sigma", "gamma", "soft_threshold"):
             _check_real(getattr(self, name), name, low=0, low_open=True)
+        if self.soft_blend not in ("softmax", "alpha"):
+            raise ValueError(f"soft_blend must be 'softmax' or 'alpha', got {self.soft_blend!r}")
         if self.visibility == "nmr" and self.antialias != "none":
             raise ValueError("visibility='nmr' needs antialias='none': its gradient is that of the pixel centres")
         if self.visibility == "soft":
@@ -294,8 +303,8 @@ def plan_passes(scene: Scene, settings: RenderSettings) -> tuple:
         "autograd": _needs_grad(scene),
     }
     wanted["nmr"] = settings.visibility == "nmr" and wanted["autograd"]    # the forward is the hard image
-    if settings.visibility == "soft":                                       # lecture 08: no per-pixel passes
-        wanted["texture"] = wanted["shadow_maps"] = wanted["shadow_rays"] = False
+    if settings.visibility == "soft":                                       # lecture 08: no shadow passes
+        wanted["shadow_maps"] = wanted["shadow_rays"] = False
     return tuple(name for name, on in wanted.items() if on)
 
 
@@ -515,7 +524,8 @@ def _run(scene: Scene, settings: RenderSettings, passes: tuple) -> RenderResult:
 
 
 def _run_soft(scene: Scene, settings: RenderSettings, passes: tuple, geo) -> RenderResult:
-    """Soft rasterization (lecture 08): colours at the vertices (or faces), blended by ``soft_rasterize``."""
+    """Soft rasterization (lecture 08): colours at the vertices (or faces), blended by ``soft_rasterize``; a
+    texture is read per pixel and face and multiplied by them."""
     mesh, camera, mode = geo.mesh, scene.camera, settings.shading
     like = mesh.verts
     bg = as_tensor(scene.background, dtype=like.dtype, device=like.device).reshape(3)
@@ -528,7 +538,7 @@ def _run_soft(scene: Scene, settings: RenderSettings, passes: tuple, geo) -> Ren
         table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
                              for m in scene.materials])                     # material, as in hard mode
         image = soft_rasterize(mesh, camera, mode="color", face_colors=table[geo.face_mesh], background=bg,
-                               **soft)
+                               blend=settings.soft_blend, **soft)
     else:
         table = torch.stack([as_tensor(m.base_color, dtype=like.dtype, device=like.device).expand(3)
                              for m in scene.materials])
@@ -538,22 +548,26 @@ def _run_soft(scene: Scene, settings: RenderSettings, passes: tuple, geo) -> Ren
             base = torch.where(has[geo.vert_mesh][:, None], _per_vertex(scene.meshes, "vert_colors", 3, like),
                                base)
         one = len(set(map(id, scene.materials))) == 1
+        texture = _soft_texture(scene, like) if "texture" in passes else {}  # read per pair, times the lighting
         if "lighting" in passes and mode == "flat":                         # one colour per face, at its centroid
             points = mesh.verts[mesh.faces].mean(1)
             mat = scene.materials[0] if one else _face_material((scene.materials, geo.face_mesh),
                                                                  torch.arange(len(points), device=like.device), points)
             diffuse, specular = light_terms(points, mesh.face_normals(), view_directions(points, camera),
                                             scene.lights, mat)
-            colors = dict(face_colors=base[mesh.faces].mean(1) * diffuse + specular)
+            colors = dict(face_colors=diffuse, specular=specular) if texture else \
+                dict(face_colors=base[mesh.faces].mean(1) * diffuse + specular)
         elif "lighting" in passes:                                          # Gouraud: lit at the vertices
             mat = scene.materials[0] if one else _face_material((scene.materials, geo.vert_mesh),
                                                                  torch.arange(len(like), device=like.device), like)
             normals = _vertex_normals(scene.meshes, like)
             diffuse, specular = light_terms(like, normals, view_directions(like, camera), scene.lights, mat)
-            colors = dict(vertex_colors=base * diffuse + specular)
+            colors = dict(vertex_colors=diffuse, specular=specular) if texture else \
+                dict(vertex_colors=base * diffuse + specular)
         else:
-            colors = dict(vertex_colors=base)
-        image = soft_rasterize(mesh, camera, mode="color", background=bg, **colors, **soft)
+            colors = {} if texture else dict(vertex_colors=base)
+        image = soft_rasterize(mesh, camera, mode="color", background=bg, blend=settings.soft_blend, **colors,
+                               **texture, **soft)
     if settings.clamp:
         image = image.clamp(0, 1)
     frags = rasterize(mesh, camera, cull_backfaces=settings.cull_backfaces) if "rasterize" in passes else None
@@ -563,6 +577,17 @@ def _run_soft(scene: Scene, settings: RenderSettings, passes: tuple, geo) -> Ren
     return RenderResult(image=image, depth=frags.depth if settings.return_depth else None, normals=normals,
                         silhouette=silhouette if settings.return_silhouette else None, fragments=frags,
                         passes=passes)
+
+
+def _soft_texture(scene, like) -> dict:
+    """The texture and uvs of a one-mesh scene, as ``soft_rasterize`` takes them (the soft path reads the
+    texture per (pixel, face) pair, bilinearly, whatever ``texture_filter``)."""
+    if len(scene.meshes) > 1:
+        raise ValueError("visibility='soft' draws the texture of a one-mesh scene; join the meshes first "
+                         "(course.mesh.join_meshes puts their textures into one atlas) or set textures=False")
+    mesh = scene.meshes[0]
+    return dict(texture=as_tensor(mesh.texture, dtype=like.dtype, device=like.device)[..., :3],
+                uvs=as_tensor(mesh.uvs, dtype=like.dtype, device=like.device))
 
 
 def _shade(scene, geo, frags, settings, passes, depth_range=None, spacing=1.0, shadows=None):

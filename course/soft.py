@@ -17,7 +17,11 @@ with a probabilistic OR, ``1 - Π_j (1 - D_j)``; a colour image with a softmax o
     I = (Σ_j w_j C_j + w_b C_b) / (Σ_j w_j + w_b),   w_j = D_j exp(z_j / γ),   w_b = exp(ε / γ),
 
 where z_j ∈ [0, 1] is the face's normalised inverse depth at the pixel (1 at the near plane, 0 at the far
-one; see ``_nearness``) and the background C_b is one more term at z = ε. Everything is computed in logs
+one; see ``_nearness``) and the background C_b is one more term at z = ε. C_j is the face's colour at the
+pixel: flat, or interpolated from its vertices, or read from a texture at the uv of the pixel's
+perspective-correct barycentrics in the face (SoftRas's per-pixel lookup), times a lighting factor. With
+``blend="alpha"`` the background leaves the softmax and the faces' blend is composited over it by the
+silhouette, ``I = α Σ_j w_j C_j / Σ_j w_j + (1 - α) C_b``: no fattening (below). Everything is computed in logs
 (``logsigmoid``, the max subtracted before ``exp``), so float32 stays finite for σ down to 1e-7 and γ down to
 1e-5. Only (pixel, face) pairs that can matter are computed: a face's weight relative to the largest term
 at the pixel must reach ``threshold`` (sigmoid *and* softmax factor, so the error stays bounded as γ → 0).
@@ -53,6 +57,7 @@ from .camera import world_to_camera
 from .raster import _camera_space, _check_inputs, _clip_near, _project
 from .scan import _expand, _max3, _min3
 from .tensors import _check_finite, _check_flag, _check_real, as_tensor
+from .textures import sample_texture
 
 __all__ = ["soft_rasterize"]
 
@@ -270,10 +275,64 @@ def _background(background, C, dtype, device):
     return bg.expand(C)
 
 
+def _pair_colors(face_colors, vertex_colors, texture, uvs, specular, verts, faces, dtype):
+    """The checked colour arguments of colour mode, as ``_ColorSums`` takes them.
+
+    Without a texture: (colors, None, vert_attr, None), colors (F, C) or (V, C) with ``specular`` already
+    added (interpolation is linear, so adding before or after is the same), vert_attr the vertex colours to
+    clip with the faces (or None). With a texture (Ht, Wt, C) and uvs (V, 2): (None, texture, vert_attr,
+    face_attr), the per-vertex (V, A_v) and per-face (F, A_f) attributes whose concatenation, per corner, is
+    ``[uv (2) | colour factor (C), if given | specular (C), if given]`` (``_shade_pairs`` reads it back)."""
+    if (texture is None) != (uvs is None):
+        raise ValueError("a texture needs uvs (V, 2), and uvs need a texture (Ht, Wt, C): give both or neither")
+    if texture is None:
+        colors = _colors(face_colors, vertex_colors, verts, faces, dtype)
+        if specular is not None:
+            colors = colors + _like_colors(specular, colors, "specular", "face_colors" if vertex_colors is None
+                                           else "vertex_colors")
+        return colors, None, (colors if vertex_colors is not None else None), None
+    tex = as_tensor(texture, device=verts.device, name="texture")
+    if tex.dim() != 3 or min(tex.shape) < 1:
+        raise ValueError(f"texture must have shape (Ht, Wt, C), none of them 0, got {tuple(tex.shape)}")
+    _check_finite(tex, "texture")
+    uv = as_tensor(uvs, device=verts.device, name="uvs")
+    if tuple(uv.shape) != (verts.shape[0], 2):
+        raise ValueError(f"uvs must have shape ({verts.shape[0]}, 2), one (u, v) per vertex, got {tuple(uv.shape)}")
+    _check_finite(uv, "uvs")
+    dtype = torch.promote_types(dtype, tex.dtype)
+    C = tex.shape[2]
+    vert_attr, face_attr = [uv.to(dtype)], []
+    if face_colors is not None and vertex_colors is not None:
+        raise ValueError("give at most one of face_colors (F, C) or vertex_colors (V, C) with a texture")
+    if face_colors is not None or vertex_colors is not None:
+        colors = _colors(face_colors, vertex_colors, verts, faces, dtype)
+        if colors.shape[1] != C:
+            raise ValueError(f"the colours multiply the texture: they need its {C} channels, got {colors.shape[1]}")
+        parts = vert_attr if vertex_colors is not None else face_attr
+        parts.append(colors.to(dtype))
+        if specular is not None:
+            parts.append(_like_colors(specular, colors, "specular", "face_colors" if vertex_colors is None
+                                      else "vertex_colors").to(dtype))
+    elif specular is not None:
+        raise ValueError("specular needs face_colors or vertex_colors (the factor the texture is multiplied by): "
+                         "it is given per face or per vertex like them")
+    return None, tex.to(dtype), torch.cat(vert_attr, 1), torch.cat(face_attr, 1) if face_attr else None
+
+
+def _like_colors(x, colors, name, kind):
+    """``x`` checked to have the shape of ``colors`` (``kind`` names them in the error)."""
+    t = as_tensor(x, dtype=colors.dtype, device=colors.device, name=name)
+    if t.shape != colors.shape:
+        raise ValueError(f"{name} must have the shape of {kind}, {tuple(colors.shape)}, got {tuple(t.shape)}")
+    _check_finite(t, name)
+    return t
+
+
 def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-4, gamma: float = 1e-4,
                    face_colors=None, vertex_colors=None, background=0.0, threshold: float = 1e-4,
                    eps: float = 1e-3, cull_backfaces: bool = True, cutoff: str = "relative",
-                   depth: str = "inverse") -> torch.Tensor:
+                   depth: str = "inverse", texture=None, uvs=None, specular=None,
+                   blend: str = "softmax") -> torch.Tensor:
     """Soft rasterization (Liu et al. 2019): a silhouette or colour image smooth in every vertex position.
 
     mesh: ``verts`` (V, 3) world space, ``faces`` (F, 3) int64; camera: a ``Camera`` (perspective or
@@ -281,7 +340,18 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     ``"color"`` returns (H, W, C), the softmax over depth with the background as one more term, the colour of
     a face being ``face_colors`` (F, C) or ``vertex_colors`` (V, C) interpolated with perspective-correct
     barycentrics (clamped to the triangle outside it); finite, integers are taken as floats.
+    texture: (Ht, Wt, C) with uvs (V, 2) (u right, v up; ``textures.sample_texture``): a face's colour at a
+    pixel is the texture, bilinearly filtered, at the uv of that pixel's perspective-correct barycentrics in
+    the face (clamped outside it), the lookup SoftRas makes per pixel and face; ``face_colors`` or
+    ``vertex_colors`` (C channels, optional) then multiply it, and ``specular`` ((F, C) or (V, C), like them)
+    is added: ``texel · colour + specular``, the shape of a lighting model's ``base · diffuse + specular``
+    (SoftRas likewise multiplies its textures by the lighting). Without a texture ``specular`` is simply added.
     background: (C,) or a number (colour mode; a silhouette's background is 0).
+    blend: ``"softmax"`` (default, the paper) puts the background into the depth softmax as described
+    below; ``"alpha"`` blends the faces alone and composites the result over the background with the
+    silhouette's coverage α: ``I = α Σ_j w_j C_j / Σ_j w_j + (1 - α) C_b``. The softmax lets a face outweigh the
+    background far outside its edge (the fattening below); alpha compositing puts the object's edge where
+    D = 1/2, on the true edge, whatever γ (γ then only decides occlusion between faces).
     sigma: sharpness, in the paper's NDC units (image width 2): ``σ_px = σ W² / 4`` px².
     gamma: the depth softmax's temperature; z is the normalised depth (``_nearness``); eps: the
     background's z. depth: ``"inverse"`` (default), z affine in 1/depth; ``"linear"``, z = (far - depth) /
@@ -299,47 +369,70 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     image then differs from the uncut formula, and no face spreads beyond ``r² = σ_px log(1/threshold - 1)``.
     cull_backfaces: skip faces facing away (front faces are CCW). Faces crossing the near plane are clipped.
     A mesh without faces gives the background. Memory is bounded by CHUNK pairs, not by the number of
-    candidates. Differentiable w.r.t. verts, the colours and the camera's K, R and t; dtype and device of
-    the inputs.
+    candidates. Differentiable w.r.t. verts, the colours, the texture, its uvs, specular and the camera's
+    K, R and t; dtype and device of the inputs.
     """
     sigma, gamma, threshold, eps = _check_soft(mode, sigma, gamma, threshold, eps, cutoff, depth)
     cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
     dtype = torch.promote_types(verts.dtype, camera.dtype)
-    colors = bg = None
+    if blend not in ("softmax", "alpha"):
+        raise ValueError(f"blend must be 'softmax' or 'alpha', got {blend!r}")
+    colors = bg = texture_ = vert_attr = None
     if mode == "color":
-        colors = _colors(face_colors, vertex_colors, verts, faces, dtype)
-        bg = _background(background, colors.shape[1], colors.dtype, verts.device)
-    xy, q, face, attr = _screen_faces(verts, faces, camera, cull_backfaces,
-                                      colors if vertex_colors is not None and mode == "color" else None)
+        colors, texture_, vert_attr, face_attr = _pair_colors(face_colors, vertex_colors, texture, uvs, specular,
+                                                              verts, faces, dtype)
+        like = texture_ if texture_ is not None else colors
+        bg = _background(background, texture_.shape[2] if texture_ is not None else colors.shape[1], like.dtype,
+                         verts.device)
+    elif any(x is not None for x in (texture, uvs, specular)):
+        raise ValueError("texture, uvs and specular are for mode='color'; a silhouette has no colours")
+    xy, q, face, attr = _screen_faces(verts, faces, camera, cull_backfaces, vert_attr)
     s = 4.0 / (W * W * sigma)                                               # 1 / σ_px
     x_max = math.log(1 / threshold)                                         # sigmoid(-x) >= thr ⇒ x <= this
     # cutoff="absolute": a pair is dropped exactly where D = sigmoid(x) < threshold, i.e. x < x_cut
     x_cut = math.log(threshold) - math.log1p(-threshold) if cutoff == "absolute" else None
     if mode == "silhouette":
-        radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
-        xy64 = xy.detach().double()
-        groups = _triangle_groups(xy64, radius, W, H)
-        log_empty = torch.zeros(H * W, dtype=dtype, device=verts.device)
-        for lo, hi in groups:
-            # each group of triangles adds its log(1 - D_j) to its pixels; with several groups, a group's
-            # pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all)
-            log_empty = log_empty + _checkpointed(len(groups) > 1, _silhouette_group, xy, xy64, radius, lo, hi,
-                                                  W, H, s, x_cut)
-        return (-torch.expm1(log_empty)).view(H, W)                         # 1 - Π (1 - D_j), stably
+        return _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype).view(H, W)
+    if texture_ is not None:                                                # (T, 3, A) corner attributes:
+        if face_attr is not None:                                           # [uv | per-face colour, specular]
+            attr = torch.cat([attr, face_attr.to(attr.dtype)[face][:, None].expand(-1, 3, -1)], 2)
+    elif attr is None:
+        attr = colors                                                       # (F, C) flat colours, as they are
     near = _nearness(q.detach().double(), camera, depth)                    # (T, 3) z of the corners
     # (T,) the largest useful x: relative, a nearer face reaches farther; absolute, D >= threshold only
     x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma * (x_cut is None)
     pixel, tri, top, z_top = _color_pairs(xy.detach(), near, (x_reach / s).sqrt(), W, H, s, gamma, eps,
                                           math.log(threshold), x_cut,
                                           q.detach().double() if depth == "linear" else None, camera)
+    C = bg.shape[0]
     w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
+    if blend == "alpha":                                                    # the faces alone: no background term
+        w_bg = torch.zeros_like(w_bg)
     # the background's term plus every kept pair's w and w c, summed per pixel CHUNK pairs at a time; no
     # per-pair tensor outlives its chunk, in the forward or the backward pass (``_ColorSums``)
-    num, den = _ColorSums.apply(w_bg[:, None] * bg, w_bg, xy, q, colors if attr is None else attr, face, tri,
-                                pixel, (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera, depth))
-    return (num / den[:, None]).view(H, W, colors.shape[1])              # (H*W, C) / (H*W, 1)
+    num, den = _ColorSums.apply(w_bg[:, None] * bg, w_bg, xy, q, attr, texture_, face, tri, pixel,
+                                (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera, depth, C))
+    if blend == "softmax":
+        return (num / den[:, None]).view(H, W, C)                           # (H*W, C) / (H*W, 1)
+    faces_color = num / torch.where(den > 0, den, torch.ones_like(den))[:, None]   # (H*W, C); 0 where no face
+    alpha = _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype)[:, None]      # (H*W, 1)
+    return (alpha * faces_color + (1 - alpha) * bg).view(H, W, C)
+
+
+def _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype):
+    """(H*W,) the probabilistic OR ``1 - Π (1 - D_j)`` of the screen triangles xy (T, 3, 2)."""
+    radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
+    xy64 = xy.detach().double()
+    groups = _triangle_groups(xy64, radius, W, H)
+    log_empty = torch.zeros(H * W, dtype=dtype, device=xy.device)
+    for lo, hi in groups:
+        # each group of triangles adds its log(1 - D_j) to its pixels; with several groups, a group's
+        # pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all)
+        log_empty = log_empty + _checkpointed(len(groups) > 1, _silhouette_group, xy, xy64, radius, lo, hi,
+                                              W, H, s, x_cut)
+    return -torch.expm1(log_empty)                                          # 1 - Π (1 - D_j), stably
 
 
 def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s, x_cut=None):
@@ -456,20 +549,19 @@ class _ColorSums(torch.autograd.Function):
     the pairs' order, the same numbers as one ``index_add`` over all of them.
 
     Inputs: bg_num (H*W, C) and bg_den (H*W,), the background's term (where the sums start); xy (T, 3, 2),
-    q (T, 3) and colors ((F, C) face colours or (T, 3, C) vertex colours): the differentiable ones; face (T,),
-    tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest: (W, s, gamma, camera, depth), the other arguments
-    of ``_color_terms``. Differentiable once (no double backward)."""
+    q (T, 3), colors ((F, C) face colours or (T, 3, A) corner attributes) and texture (Ht, Wt, C) or None:
+    the differentiable ones; face (T,), tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest:
+    (W, s, gamma, camera, depth, C), the other arguments of ``_color_terms``. Differentiable once (no double
+    backward)."""
 
     @staticmethod
-    def forward(ctx, bg_num, bg_den, xy, q, colors, face, tri, pixel, top, z_top, rest):
-        ctx.save_for_backward(xy, q, colors, face, tri, pixel, top, z_top)
+    def forward(ctx, bg_num, bg_den, xy, q, colors, texture, face, tri, pixel, top, z_top, rest):
+        ctx.save_for_backward(xy, q, colors, texture, face, tri, pixel, top, z_top)
         ctx.rest = rest
-        W, s, gamma, camera, depth = rest
         num, den = bg_num.clone(), bg_den.clone()                           # forward runs without a graph
         for lo in range(0, pixel.numel(), CHUNK):
             p = pixel[lo:lo + CHUNK]
-            w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy, q, face, colors, W, s, gamma, top, z_top, camera,
-                                 depth)
+            w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy, q, face, colors, texture, top, z_top, *rest)
             num.index_add_(0, p, wc)                                        # this chunk's terms, added in place
             den.index_add_(0, p, w)
         return num, den
@@ -477,19 +569,20 @@ class _ColorSums(torch.autograd.Function):
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_num, g_den):
-        xy, q, colors, face, tri, pixel, top, z_top = ctx.saved_tensors
-        W, s, gamma, camera, depth = ctx.rest
-        need = ctx.needs_input_grad[2:5]                                    # xy, q, colors
-        grads = [torch.zeros_like(x) if n else None for x, n in zip((xy, q, colors), need)]
+        xy, q, colors, texture, face, tri, pixel, top, z_top = ctx.saved_tensors
+        inputs = (xy, q, colors, texture)
+        need = ctx.needs_input_grad[2:6]                                    # xy, q, colors, texture
+        grads = [torch.zeros_like(x) if n else None for x, n in zip(inputs, need)]
         if any(need):
             with torch.enable_grad():
                 # detached copies: the chunk's graph starts here and is freed after each chunk's grad
-                xy_, q_, colors_ = (x.detach().requires_grad_(n) for x, n in zip((xy, q, colors), need))
-                wrt = [x for x, n in zip((xy_, q_, colors_), need) if n]
+                xy_, q_, colors_, texture_ = (None if x is None else x.detach().requires_grad_(n)
+                                              for x, n in zip(inputs, need))
+                wrt = [x for x, n in zip((xy_, q_, colors_, texture_), need) if n]
                 for lo in range(0, pixel.numel(), CHUNK):
                     p = pixel[lo:lo + CHUNK]
-                    w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy_, q_, face, colors_, W, s, gamma, top, z_top,
-                                         camera, depth)
+                    w, wc = _color_terms(tri[lo:lo + CHUNK], p, xy_, q_, face, colors_, texture_, top, z_top,
+                                         *ctx.rest)
                     # d(sum)/d(term) is 1 at the term's pixel: each pair's gradient is its pixel's
                     part = iter(torch.autograd.grad((w, wc), wrt, (g_den.index_select(0, p),
                                                                    g_num.index_select(0, p))))
@@ -507,9 +600,10 @@ def _silhouette_terms(tri, pixel, xy, W, s, x_cut=None):
     return log_miss if x_cut is None else torch.where(x.detach().double() >= x_cut, log_miss, 0.0)
 
 
-def _color_terms(tri, pixel, xy, q, face, colors, W, s, gamma, top, z_top, camera, depth="inverse"):
+def _color_terms(tri, pixel, xy, q, face, colors, texture, top, z_top, W, s, gamma, camera, depth, C):
     """Each pair's softmax weight ``D exp((z - z_top)/γ - top)`` (N,) and weighted colour (N, C); colors is
-    (F, C) face colours or (T, 3, C) the screen triangles' vertex colours. top, z_top: (H*W,) per pixel."""
+    (F, C) face colours or (T, 3, A) the screen triangles' corner attributes: vertex colours, or with a
+    texture (Ht, Wt, C) the layout of ``_pair_colors``. top, z_top: (H*W,) per pixel."""
     x, b = _pair_terms(xy, tri, pixel, W, s)                                # (N,), 3 × (N,)
     qt = [q[:, k].index_select(0, tri) for k in range(3)]                   # 3 × (N,)
     z = _nearness(b[0] * qt[0] + b[1] * qt[1] + b[2] * qt[2], camera, depth)   # q is affine on screen
@@ -519,5 +613,20 @@ def _color_terms(tri, pixel, xy, q, face, colors, W, s, gamma, top, z_top, camer
     else:
         pc = b if camera.orthographic else [bk * qk for bk, qk in zip(b, qt)]   # perspective-correct
         total = pc[0] + pc[1] + pc[2]
-        c = sum((pc[k] / total)[:, None] * colors[:, k].index_select(0, tri) for k in range(3))   # (N, C)
+        c = sum((pc[k] / total)[:, None] * colors[:, k].index_select(0, tri) for k in range(3))   # (N, A)
+        if texture is not None:
+            c = _shade_pairs(c, texture, C)                                 # (N, C)
     return w, w[:, None] * c
+
+
+def _shade_pairs(attr, texture, C):
+    """(N, C) a textured pair's colour from its interpolated attributes (N, A) (``_pair_colors``' layout):
+    the texture looked up at the pair's uv (bilinear, ``textures.sample_texture``), times the colour factor,
+    plus the specular term, where given. As in SoftRas, the texture is read at each pixel's own
+    perspective-correct barycentrics of each face it blends, clamped to the face outside it."""
+    texel = sample_texture(texture, attr[:, :2])                            # (N, C)
+    if attr.shape[1] >= 2 + C:
+        texel = texel * attr[:, 2:2 + C]
+    if attr.shape[1] == 2 + 2 * C:
+        texel = texel + attr[:, 2 + C:]
+    return texel
