@@ -40,9 +40,13 @@ def test_cli_fast_camera_rows_every_method(tmp_path, capsys):
     assert cli(["fit", "--fast", "--only", "camera", "--threads", "1", "--json", str(out)]) == 0
     rows = json.loads(out.read_text())
     check_rows(rows)
-    assert [r["method"] for r in rows] == [m for m in fit.CAMERA_METHODS for _ in range(2)]
+    textured = ["soft, render() reference, defaults", "soft, render() reference, one start"]
+    assert [r["method"] for r in rows] == [m for m in list(fit.CAMERA_METHODS) + textured for _ in range(2)]
     assert [r["metric"] for r in rows[:2]] == ["rotation error", "centre error"]
-    assert all(r["start"] == pytest.approx(30.0, abs=1e-6) for r in rows[::2])   # camera_problem: 30° off
+    flat = len(fit.CAMERA_METHODS) * 2
+    assert all(r["start"] == pytest.approx(30.0, abs=1e-6) for r in rows[:flat:2])   # camera_problem: 30° off
+    # the textured start: orbited 45° about x by look_at, which keeps the camera upright: 39° of rotation
+    assert all(r["start"] == pytest.approx(39.06, abs=0.01) for r in rows[flat::2])
     assert all(r["steps"] == 5 for r in rows)
     hard = [r for r in rows if r["method"] == "hard"]                       # autograd alone: the pose never moves
     assert all(r["final"] == pytest.approx(r["start"]) for r in hard)
