@@ -1,4 +1,4 @@
-"""Command line: ``python -m course render | bench | grade | release | workspace``.
+"""Command line: ``python -m course render | bench | grade | release | workspace | gradescope``.
 
 Each sub-command lives beside the topic it belongs to and exposes ``cli(argv) -> int``.
 """
@@ -11,6 +11,7 @@ COMMANDS = {
     "grade": ("course.grading.grader", "grade exercise notebooks in fresh kernels"),
     "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),
     "workspace": ("course.grading.workspace", "copy an exercise into work/, your own folder (never overwritten)"),
+    "gradescope": ("course.grading.gradescope", "build the Gradescope autograder (a zip) of one exercise"),
 }
 
 

@@ -11,7 +11,14 @@ The package, one module per job; each imports only the modules above it in this 
     registry.py    Task, Result, the TASKS registry and its ``task`` decorator, run_check, check, format_result
     lecture01.py   the checks of lecture 1's tasks (1.1-1.4), registered on import; likewise lecture02-11
     release.py     ``python -m course release``: exercises/ written from solutions/
+    submissions.py who handed in a notebook (Submission, student_of) and its lecture
+    roster.py      the class list: names, ids, emails, sections, extensions (``grade --roster``)
+    late.py        due dates and the linear late penalty (``grade --due --late-days``)
     grader.py      ``python -m course grade``: whole notebooks scored in fresh kernels (and how far to trust it)
+    gradebook.py   a grading run's exports: Canvas and Moodle imports, the roster's and lateness columns
+    feedback.py    one Markdown file per notebook to return to its student (``grade --feedback``)
+    flags.py       copy flags for the TA: code like the package's or a classmate's (``grade --flags``)
+    gradescope.py  ``python -m course gradescope NN``: a Gradescope autograder zip, and what it runs per submission
 
 Importing ``course.grading`` imports all of them, so every task is registered; the names below are the ones
 notebooks, tests and the command line use.

@@ -15,6 +15,11 @@ its own kernel with its own time limits, from threads (``grade_notebooks``); the
 order given, the same as one at a time. The command prints a table, each lost point's reason, and a summary
 per task (the mean points and how many scored 0, 1, ..., max), so the class's hard task shows.
 
+A term's options (``gradebook.add_arguments``): ``--roster`` maps folders or file names to students' names, ids,
+emails and sections; ``--due`` and ``--late-days`` apply a linear late penalty, shown beside the raw score;
+``--canvas`` and ``--moodle`` write the LMS imports, ``--feedback`` one Markdown file per notebook, ``--flags`` a
+copy-flag report for the TA (``flags.py``). Scores themselves never depend on them.
+
 How far the grader can be trusted
 ---------------------------------
 The printed score lines are never read. After a notebook has run, the grader executes one more cell in the
@@ -45,17 +50,17 @@ import csv
 import json
 import math
 import os
-import re
 import secrets
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from dataclasses import dataclass
 from pathlib import Path
 
+from . import gradebook
 from .helpers import summarize_exception
 from .registry import DEFAULT_TIMEOUT, TASKS, Result, Task, _task_key, run_check, tasks_for_lecture
 from .release import CHECK_CALL
+from .submissions import DuplicateSubmission, Submission, _lecture_number, student_of
 
 __all__ = ["grade_notebook", "grade_notebooks", "student_of", "assign_students", "Submission",
            "DuplicateSubmission", "cli"]
@@ -102,11 +107,6 @@ def _grade_namespace(namespace: dict, task_ids: list[str], timeout: float) -> li
         results.append({"task": result.task, "points": result.points, "max_points": result.max_points,
                         "message": result.message})
     return results
-
-
-def _lecture_number(path: Path) -> int | None:
-    match = re.match(r"(\d+)_", path.name)
-    return int(match.group(1)) if match else None
 
 
 def _missing(tasks: list[Task], message: str) -> list[Result]:
@@ -190,28 +190,6 @@ def _execute_with_grader(nb, path: Path, task_ids: list[str], timeout: float):
 # ------------------------------------------------------------------------------- a class of notebooks
 
 STUDENT_MODES = ("auto", "folder", "notebook")
-
-
-@dataclass(frozen=True)
-class Submission:
-    """One notebook to grade: ``path`` as given, ``student`` who handed it in (``student_of``, or the path
-    itself when every notebook stands alone), ``lecture`` the NN of its ``NN_`` name (None: no tasks, not run)."""
-    path: Path
-    student: str
-    lecture: int | None
-
-
-class DuplicateSubmission(ValueError):
-    """Two notebooks of one student and lecture: which of them counts is the teaching assistant's call."""
-
-
-def student_of(path) -> str:
-    """Who handed in ``path``: ``<student>`` in nbgrader's ``.../submitted/<student>/<assignment>/NN_x.ipynb``,
-    otherwise the folder above the notebook (``class/<student>/03_rasterization.ipynb``)."""
-    parts = Path(os.path.abspath(path)).parts
-    if len(parts) >= 4 and parts[-4] == "submitted":
-        return parts[-3]
-    return parts[-2] if len(parts) >= 2 else str(path)
 
 
 def assign_students(paths, mode: str = "auto") -> tuple[list[Submission], bool, str]:
@@ -336,21 +314,28 @@ def _summary(graded: Graded, task_ids: list[str], by_student: bool) -> str:
             + _align(rows, left=2))
 
 
-def _write_json(path: Path, graded: Graded, by_student: bool) -> None:
+def _write_json(path: Path, graded: Graded, by_student: bool, extra: dict | None = None) -> None:
+    """{notebook: [record per task]}; ``extra`` (per notebook path) adds the roster's and the due date's fields
+    to each of its records (``gradebook.extra_fields``)."""
+    extra = extra or {}
     student = (lambda s: {"student": s.student}) if by_student else (lambda s: {})
     data = {str(s.path): [{**student(s), "task": r.task, "points": r.points, "max_points": r.max_points,
-                           "message": r.message} for r in results] for s, results in graded}
+                           "message": r.message, **extra.get(s.path, {})} for r in results] for s, results in graded}
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
-def _write_csv(path: Path, graded: Graded, task_ids: list[str], by_student: bool) -> None:
+def _write_csv(path: Path, graded: Graded, task_ids: list[str], by_student: bool, extra: dict | None = None) -> None:
+    """One row per notebook; ``extra`` (per notebook path, column -> value) adds columns after the total."""
+    extra = extra or {}
+    columns = list(dict.fromkeys(name for fields in extra.values() for name in fields if name != "total"))
     with open(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
-        writer.writerow((["student"] if by_student else []) + ["notebook"] + task_ids + ["total"])
+        writer.writerow((["student"] if by_student else []) + ["notebook"] + task_ids + ["total"] + columns)
         for s, results in graded:
             by_id = {r.task: r.points for r in results}
             writer.writerow(([s.student] if by_student else []) + [str(s.path)]
-                            + [by_id.get(i, "") for i in task_ids] + [_points(results)[0]])
+                            + [by_id.get(i, "") for i in task_ids] + [_points(results)[0]]
+                            + [extra.get(s.path, {}).get(name, "") for name in columns])
 
 
 def _write_gradebook(path: Path, graded: Graded, task_ids: list[str]) -> None:
@@ -369,7 +354,8 @@ def _write_gradebook(path: Path, graded: Graded, task_ids: list[str]) -> None:
 
 def cli(argv: list[str] | None = None) -> int:
     """``python -m course grade NOTEBOOK... [--jobs N] [--students MODE | --student NAME] [--json FILE] [--csv FILE]
-    [--gradebook FILE] [--timeout SECONDS]``."""
+    [--gradebook FILE] [--timeout SECONDS]`` and the term's options of ``gradebook.add_arguments`` (``--roster``,
+    ``--due``, ``--late-days``, ``--canvas``, ``--moodle``, ``--feedback``, ``--flags``)."""
     parser = argparse.ArgumentParser(
         prog="python -m course grade",
         description="Run each notebook in a fresh kernel and score its tasks (tasks come from the NN_ prefix). "
@@ -396,6 +382,7 @@ def cli(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=60.0, metavar="SECONDS",
                         help=f"time limit for each cell (default: 60); each task check gets at most "
                              f"{DEFAULT_TIMEOUT:g} s")
+    gradebook.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.jobs < 1:
         print(f"error: --jobs is how many notebooks to grade at once, at least 1; got {args.jobs}", file=sys.stderr)
@@ -410,6 +397,7 @@ def cli(argv: list[str] | None = None) -> int:
             submissions, by_student, note = one_student(args.notebooks, args.student), True, ""
         else:
             submissions, by_student, note = assign_students(args.notebooks, mode)
+        plan = gradebook.prepare(args, submissions)               # roster, due date: checked before anything runs
     except (DuplicateSubmission, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -429,10 +417,16 @@ def cli(argv: list[str] | None = None) -> int:
                 print(f"  {s.path} {r.task} {r.name}: {r.message}")
     if task_ids:
         print("\n" + _summary(graded, task_ids, by_student))
+    marks = gradebook.marks_of(graded, plan)
+    for line in gradebook.report(marks, plan):
+        print(line)
+    extra = gradebook.extra_fields(marks, plan)
     if args.json:
-        _write_json(args.json, graded, by_student)
+        _write_json(args.json, graded, by_student, extra)
     if args.csv:
-        _write_csv(args.csv, graded, task_ids, by_student)
+        _write_csv(args.csv, graded, task_ids, by_student, extra)
     if args.gradebook:
         _write_gradebook(args.gradebook, graded, task_ids)
+    for line in gradebook.write_exports(args, plan, marks, by_student):
+        print(line)
     return 0
