@@ -25,6 +25,10 @@ point evaluated twice (the teapot's poles) differ in the last bits, and must not
 Everything here runs in float64, whatever the problem's dtype (``boundary_gradient``).
 A piece of edge exactly on a pixel border belongs to the pixel its midpoint falls in, the one to the right or
 below (the half-open pixels [j, j+1)): the same one-sided derivative ``exact`` returns there.
+A camera batch (``boundary_gradient`` of a list of problems, one per view) shares what depends on the mesh
+alone: the welded positions, the faces that pass through each other and their 3D segments (``_crossings``),
+whether the mesh is closed (``_closed_outward``), and the leaves; each view's edges on screen, pieces, cuts and
+visibility samples are its own, in a loop over the views, and one autograd pass differentiates their sum.
 """
 from __future__ import annotations
 
@@ -177,24 +181,23 @@ def _planes(verts_cam, faces, K, orthographic):
 
 
 def _with_crossings(edges, prob, p, weld):
-    """Append the lines where two faces pass through each other: for each pair (f, g) that may cross
-    (``discontinuities._intersecting_faces``, pairs sharing one vertex included: a fold through itself), the segment
-    f ∩ g in 3D (``_intersection_segments``), cut at the near plane and projected. The image may jump along
-    it where it is visible, which the visibility samples find. Its normal points from f's nearer side to g's."""
+    """Append the lines where two faces pass through each other: for each pair (f, g) of faces that can show
+    and cross (``_crossings``), the segment f ∩ g, cut at the near plane and projected. The image may jump
+    along it where it is visible, which the visibility samples find. Its normal points from f's nearer side
+    to g's."""
     verts = prob.params["verts"].double()
     # faces that can show (in front of the camera; front faces when back ones never show): the faces of
     # the edges and their twins (a face whose every edge is shared may own none of the merged copies)
-    cand = torch.unique(torch.cat([edges.face, edges.twin[edges.twin >= 0]]))
-    f, g = _intersecting_faces(verts, prob.faces[cand], weld, shared_vertex=True)
-    if f.numel() == 0:
-        return edges
-    f, g = cand[f], cand[g]
-    seg, ok = _intersection_segments(verts, prob.faces, f, g)               # (N, 2, 3) world, (N,)
+    shows = torch.zeros(prob.faces.shape[0], dtype=torch.bool, device=edges.face.device)
+    shows[edges.face] = True
+    shows[edges.twin[edges.twin >= 0]] = True
+    f, g, seg = _crossings(prob, weld)
+    ok = shows[f] & shows[g]
+    f, g, seg = f[ok], g[ok], seg[ok]
     cam = prob.camera0.to(dtype=torch.float64)
     ends = cam.to_camera(seg.reshape(-1, 3)).view(-1, 2, 3)                 # camera space
     ends, front = _clip_segments_near(ends, cam.near)                       # cut at z = near
-    ok &= front
-    f, g, ends = f[ok], g[ok], ends[ok]
+    f, g, ends = f[front], g[front], ends[front]
     if f.numel() == 0:
         return edges
     xy, _ = _project(ends.reshape(-1, 3), cam, cam.K.double())
@@ -210,6 +213,20 @@ def _with_crossings(edges, prob, p, weld):
     out.twin = torch.cat([edges.twin, torch.full_like(f, -1)])
     out.fold = torch.cat([edges.fold, torch.zeros_like(f, dtype=torch.bool)])
     return out
+
+
+def _crossings(prob, weld):
+    """The pairs of faces f, g (K,) that pass through each other (``discontinuities._intersecting_faces``,
+    pairs sharing one vertex included: a fold through itself) and the segment f ∩ g of each in world space
+    (``_intersection_segments``), (K, 2, 3), over the whole mesh: they depend on the mesh alone, so the views
+    of a camera batch share them (``_Problem.shared``), and each view keeps the pairs of faces it can show.
+    (Its pairs are those a search among its own faces finds: the search is exact pair by pair.)"""
+    if "crossings" not in prob.shared:
+        verts = prob.params["verts"].double()
+        f, g = _intersecting_faces(verts, prob.faces, weld, shared_vertex=True)
+        seg, ok = _intersection_segments(verts, prob.faces, f, g)           # (K, 2, 3) world, (K,)
+        prob.shared["crossings"] = f[ok], g[ok], seg[ok]
+    return prob.shared["crossings"]
 
 
 def _chord(v, d, tol):
@@ -272,27 +289,34 @@ def _clip_segments_near(ends, near):
 
 
 def _back_faces_hidden(prob, weld) -> bool:
-    """Can no back face be visible? True when the mesh is closed and consistently oriented (every welded edge
-    a → b has exactly one twin b → a), each of its connected pieces encloses a positive volume (outward
-    normals, front faces counter-clockwise), and every vertex lies beyond the near plane: the camera centre
+    """Can no back face be visible? True when the mesh is closed and consistently oriented, each of its
+    connected pieces enclosing a positive volume (``_closed_outward``: per mesh, shared by the views of a
+    camera batch, ``_Problem.shared``), and every vertex lies beyond the near plane: the camera centre
     (z = 0) is then outside the convex hull, so outside every piece, and a ray enters a piece through a front
     face before it can reach a back one. The back faces' edges can then be skipped. A check, never an
     assumption: anything else keeps every face."""
-    faces = weld[prob.faces]                                                # (F, 3) welded
-    if faces.numel() == 0:
+    verts = prob.params["verts"].double()
+    if "closed" not in prob.shared:
+        prob.shared["closed"] = _closed_outward(verts, prob.faces, weld)
+    cam = prob.camera0.to(dtype=torch.float64)
+    return prob.shared["closed"] and not bool((cam.to_camera(verts)[:, 2] <= cam.near).any())
+
+
+def _closed_outward(verts, faces, weld) -> bool:
+    """Is the mesh closed and consistently oriented (every welded edge a → b has exactly one twin b → a), with
+    each of its connected pieces enclosing a positive volume (outward normals, front faces counter-clockwise)?
+    verts: (V, 3) float64; faces: (F, 3); weld: (V,) welded ids (``_weld``)."""
+    welded = weld[faces]                                                    # (F, 3) welded
+    if welded.numel() == 0:
         return False
     V = int(weld.max()) + 1
-    a, b = faces.reshape(-1), faces.roll(-1, 1).reshape(-1)
+    a, b = welded.reshape(-1), welded.roll(-1, 1).reshape(-1)
     sorted_key, counts = torch.unique(a * V + b, return_counts=True)
     if (counts != 1).any() or (a == b).any():
         return False
     twin = b * V + a
     pos = torch.searchsorted(sorted_key, twin).clamp(max=sorted_key.numel() - 1)
     if not torch.equal(sorted_key[pos], twin):
-        return False
-    cam = prob.camera0.to(dtype=torch.float64)
-    verts = prob.params["verts"].double()
-    if (cam.to_camera(verts)[:, 2] <= cam.near).any():
         return False
     label = torch.arange(V, device=faces.device)                            # connected pieces: min label,
     for _ in range(V):                                                      # spread and jumped to a fixpoint
@@ -301,9 +325,9 @@ def _back_faces_hidden(prob, weld) -> bool:
         if torch.equal(new, label):
             break
         label = new
-    v = verts[prob.faces]                                                   # signed volume of each piece
+    v = verts[faces]                                                        # signed volume of each piece
     vol = (v[:, 0] * torch.linalg.cross(v[:, 1], v[:, 2])).sum(1) / 6
-    piece = torch.unique(label[faces[:, 0]], return_inverse=True)[1]
+    piece = torch.unique(label[welded[:, 0]], return_inverse=True)[1]
     return bool((torch.zeros(int(piece.max()) + 1, dtype=vol.dtype).index_add(0, piece, vol) > 0).all())
 
 
@@ -753,20 +777,49 @@ def boundary_pieces(prob, p):
     return edges, e[keep], (s - half)[keep], (s + half)[keep], pix[keep], value[keep]
 
 
+VIEW_PARAMETERS = ("R", "t", "focal")   # a camera's own: one gradient per view of a batch (the rest are summed)
+
+
 def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     """The boundary term ``Σ w (c_in - c_out) v_n`` by quadrature (Reynolds) or sampling (edge sampling),
     differentiated by autograd through the edges' screen positions (see the module docstring).
+
+    prob: a ``visibility._Problem``, or a list of them, the views of a camera batch (``_Problem.view``: one
+    mesh seen by N cameras, each with its weights): then the gradient of the sum of their losses, one pass of
+    autograd through every view's term; the views share the mesh's leaves and its per-mesh work (the welded
+    positions, the faces that pass through each other, whether back faces can show); each view's edges,
+    pieces and visibility samples are its own (edge sampling: ``samples`` points a view, drawn from
+    ``generator`` view after view). Returns one gradient per name: for a batch, "verts" summed over the views,
+    and a camera's own parameters ("R", "t", "focal") stacked, (N, ...), one per view.
 
     Everything is evaluated in float64 whatever the problem's dtype: the visibility samples sit 1e-6 px
     beside an edge, below float32's resolution a few pixels from the origin, so a float32 problem is cast
     up (differentiably) and its gradient cast back. A float32 scene then gets the float64 answer for its own
     (float32) numbers."""
-    p = prob.leaves(names)
-    targets = prob.targets(p, names)
-    p = {k: v.double() for k, v in p.items()}                              # the same parameters, in float64
+    probs = prob if isinstance(prob, list) else [prob]
+    leaves = [probs[0].leaves(names)]
+    leaves += [q.leaves(names, like=leaves[0]) for q in probs[1:]]         # the mesh's leaves: one set
+    terms = [_surrogate(q, {k: v.double() for k, v in p.items()}, order, samples, generator)   # float64
+             for q, p in zip(probs, leaves)]
+    terms = [t for t in terms if t is not None and t.requires_grad]
+    targets = [[p[n] for p in leaves] if n in VIEW_PARAMETERS else probs[0].targets(leaves[0], (n,))
+               for n in names]                                              # a list per name
+    flat = [x for ts in targets for x in ts]
+    grads = iter(torch.autograd.grad(sum(terms), flat, allow_unused=True) if terms else (None,) * len(flat))
+    out = []
+    for n, ts in zip(names, targets):
+        g = probs[0].gradients([next(grads) for _ in ts], ts, (n,) * len(ts))
+        out.append(torch.stack(g) if isinstance(prob, list) and n in VIEW_PARAMETERS else g[0])
+    return tuple(out)
+
+
+def _surrogate(prob, p, order, samples, generator):
+    """A scalar whose gradient in the parameters p (float64) is the boundary term of one view: ``Σ value · v_n``
+    over its points (``_jumps``, ``normal_shift``), plus the interior term for affine colours; None when no
+    edge is on screen."""
     edges, e, s, weight, pix, gap = _boundary_points(prob, p, order, samples, generator)
     if e.numel() == 0:
-        return prob.gradients((None,) * len(names), targets, names)
+        return None
     value = _jumps(prob, p, edges, e, s, weight, pix, gap)
     keep = (value != 0).nonzero().squeeze(1)
     e, s, value = e[keep], s[keep], value[keep]
@@ -774,9 +827,7 @@ def boundary_gradient(prob, names, *, order=None, samples=None, generator=None):
     surrogate = (value * normal_shift(prob, p, edges, e, s, x)).sum()       # d/dπ = Σ value · v_n
     if prob.model == "affine":                                              # the interior term: the colour field
         surrogate = surrogate + _interior(prob, p)                          # moves under fixed pieces
-    grads = torch.autograd.grad(surrogate, targets, allow_unused=True) if surrogate.requires_grad else \
-        (None,) * len(targets)
-    return prob.gradients(grads, targets, names)
+    return surrogate
 
 
 def _interior(prob, p):

@@ -58,10 +58,16 @@ pairs (whole pixels): about 0.5 KB per pair of a chunk, ≈ 8 MB at CHUNK = 2**1
 ``exact_coverage`` adds each chunk into the image and lets it go, so without autograd that is its peak;
 ``visible_regions`` returns every piece (about 150 bytes each). With autograd the graph keeps every
 chunk's tensors until backward, so memory then grows with the number of pieces in the image.
+
+A camera batch (``exact_coverage(mesh, [camera, ...], ...)``): steps 1-3 run view by view (the plan, discrete
+and cheap), the plans are joined with pixel ids ``view · H · W + pixel`` (``_joined``), and steps 4-5 run
+chunk by chunk over every view's pairs at once. The chunks keep their size, so the gain is the partly empty
+last chunk of every view, and the per-chunk work a call per view repeats: measured in ``bench fit --only batch``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from itertools import accumulate
 
 import torch
 
@@ -265,6 +271,11 @@ class _Faces:
     count: torch.Tensor
     coef: torch.Tensor
 
+    @staticmethod
+    def cat(parts) -> "_Faces":
+        """The rows of several, in order (the views of a camera batch)."""
+        return _Faces(*(torch.cat([getattr(p, f.name) for p in parts]) for f in fields(_Faces)))
+
 
 def _safe(x):
     """x with values too close to 0 replaced by ±sqrt(tiny): a finite quotient for edge-on faces."""
@@ -389,6 +400,24 @@ def _plan(verts, faces, camera, shift: bool = False, mask=None) -> _Plan:
     rest = ~full
     return _Plan(used, inside, flip, geo, edge_ok, far, geo.xy.amin(1), geo.xy.amax(1), pixel[rest], face[rest],
                  size[rest], pixel[full], face[full])
+
+
+def _joined(plans, pixels) -> _Plan:
+    """One plan of a camera batch from its views' (``_plan``, in order): view k's pixels numbered
+    k · pixels + their own, its faces' rows after the earlier views' (local face indices offset by their
+    used faces), so its pairs stay sorted by pixel and the chunks run over every view at once."""
+    if len(plans) == 1:
+        return plans[0]
+    offset = list(accumulate([p.used.numel() for p in plans[:-1]], initial=0))
+
+    def cat(name):
+        return torch.cat([getattr(p, name) for p in plans])
+    return _Plan(cat("used"), cat("inside"), cat("flip"), _Faces.cat([p.geo for p in plans]), cat("edge_ok"),
+                 cat("far"), cat("lo"), cat("hi"),
+                 torch.cat([p.pixel + k * pixels for k, p in enumerate(plans)]),
+                 torch.cat([p.face + o for p, o in zip(plans, offset)]), cat("size"),
+                 torch.cat([p.full_pixel + k * pixels for k, p in enumerate(plans)]),
+                 torch.cat([p.full_face + o for p, o in zip(plans, offset)]))
 
 
 def _hide(pixel, face, face_id, geo, edge_ok, far, camera, shift):
@@ -608,13 +637,16 @@ def _subtract(pieces: _Pieces, lines, lines_dec, tol):
 
 def _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift):
     """The visible pieces of the pairs lo:hi of the plan (whole pixels). Returns poly, count, pair index.
-    shift: take the decisions on a shifted float64 copy (``_Pieces``), for a gradient."""
+    shift: take the decisions on a shifted float64 copy (``_Pieces``), for a gradient. The plan may be a
+    camera batch's (``_joined``): a pixel id is then view · H · W + the pixel's own, and its square's corners
+    are those of the pixel's own id; camera: any of the batch's (its size, far plane and projection)."""
     pixel, face, size = plan.pixel[lo:hi], plan.face[lo:hi], plan.size[lo:hi]
     start = _groups(pixel)[0]
-    pieces, corner, corner_dec = _square_piece(geo, plan, pixel, face, camera, dtype, shift)
+    own = pixel % (camera.width * camera.height)                            # the pixel in its view's image
+    pieces, corner, corner_dec = _square_piece(geo, plan, own, face, camera, dtype, shift)
     tol = _tol(torch.float64 if shift else dtype)
     pieces = pieces.keep(tol)
-    corner64 = _corners(pixel, camera.width)
+    corner64 = _corners(own, camera.width)
     n, scale = _nearness(plan.geo.coef[face], corner64)                     # (R, 4) at the pixel's corners
     g_lo, g_hi = plan.lo[face] - corner64[:, 0], plan.hi[face] - corner64[:, 0]   # (R, 2) relative bbox
     done = []                                                               # pieces whose pixel has no more faces
@@ -665,35 +697,46 @@ def _region_chunks(verts, faces, camera, dtype, keys=None):
     """The visible pieces chunk by chunk: one ``VisibleRegions`` for the pixels a single face covers, then
     one per chunk of at most about ``CHUNK`` (pixel, face) pairs.
 
-    keys: None, or (F,) integers 0..K-1, equal for faces of one colour (``_color_keys``), when only the image matters (flat colours,
-    no derivative w.r.t. a face's own colour): a pixel whose square no edge where the colour can jump touches
-    (``discontinuities.discontinuity_pixels``: silhouettes, colour changes, crossings, near/far cuts) shows
-    one colour all over, the colour at its centre, whatever faces tile it; it comes back as one unit square
-    of the face the centre sees, unclipped. The interior of a one-colour silhouette is then skipped: no
-    piece of its thousands of interior edges is clipped. Its derivative w.r.t. the vertices is 0, as it
-    should be (moving an edge between two faces of one colour changes nothing); w.r.t. each face's colour it
-    would not be (the area of each face is not computed), hence keys only without that derivative."""
-    shift = torch.is_grad_enabled() and any(x.requires_grad for x in (verts, camera.K, camera.R, camera.t))
+    camera: a ``Camera``, or a list of N cameras of one size sharing far and the projection (a camera batch:
+    pixel ids are then view · H · W + the pixel's own). A batch is planned view by view (``_plan``, discrete,
+    float64) and the plans joined (``_joined``), so that the chunks, the expensive clipping, run over every
+    view's pairs at once: fewer, fuller chunks than a call per view (each view's last chunk is partly empty).
+
+    keys: None, or (F,) integers 0..K-1, equal for faces of one colour (``_color_keys``), when only the image
+    matters (flat colours, no derivative w.r.t. a face's own colour): a pixel whose square no edge where the
+    colour can jump touches (``discontinuities.discontinuity_pixels``: silhouettes, colour changes, crossings,
+    near/far cuts) shows one colour all over, the colour at its centre, whatever faces tile it; it comes back
+    as one unit square of the face the centre sees, unclipped. The interior of a one-colour silhouette is then
+    skipped: no piece of its thousands of interior edges is clipped. Its derivative w.r.t. the vertices is 0,
+    as it should be (moving an edge between two faces of one colour changes nothing); w.r.t. each face's
+    colour it would not be (the area of each face is not computed), hence keys only without that derivative."""
+    cameras = camera if isinstance(camera, list) else [camera]
+    pixels = cameras[0].width * cameras[0].height                           # of one view
+    shift = torch.is_grad_enabled() and any(x.requires_grad for c in cameras for x in (verts, c.K, c.R, c.t))
     square = torch.tensor([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype, device=verts.device)
-    mask = None
+    masks = [None] * len(cameras)
     if keys is not None and keys.numel() and int(keys.max()) + 1 < keys.numel():   # faces share a colour
-        with torch.no_grad():
-            mesh = _Mesh(verts, faces)
-            mask = discontinuity_pixels(mesh, camera, keys).reshape(-1)     # where the colour may jump
-            seen = raster.rasterize(mesh, camera).face_id.reshape(-1)       # the centre's face elsewhere
-            quiet = (~mask & (seen >= 0)).nonzero().squeeze(1)
-        yield VisibleRegions(quiet, seen[quiet], square.expand(quiet.numel(), 4, 2),
-                             torch.full_like(quiet, 4), square.new_ones(quiet.numel()))
-    with torch.no_grad():
-        plan = _plan(verts, faces, camera, shift, mask)                     # (shift: _Pieces, ties)
+        mesh = _Mesh(verts, faces)
+        for k, cam in enumerate(cameras):
+            with torch.no_grad():
+                masks[k] = discontinuity_pixels(mesh, cam, keys).reshape(-1)    # where the colour may jump
+                seen = raster.rasterize(mesh, cam).face_id.reshape(-1)      # the centre's face elsewhere
+                quiet = (~masks[k] & (seen >= 0)).nonzero().squeeze(1)
+            yield VisibleRegions(quiet + k * pixels, seen[quiet], square.expand(quiet.numel(), 4, 2),
+                                 torch.full_like(quiet, 4), square.new_ones(quiet.numel()))
+    with torch.no_grad():                                                   # (shift: _Pieces, ties)
+        plans = [_plan(verts, faces, cam, shift, mask) for cam, mask in zip(cameras, masks)]
     # per-face geometry in float64 (one row per face: cheap), the pieces in dtype once pixel-relative
-    verts_cam = world_to_camera(verts.double(), camera.R.double(), camera.t.double())   # (V, 3)
-    geo = _face_geometry(verts_cam, faces[plan.used], camera, camera.K.double(), plan.inside, plan.flip)
+    geo = []
+    for cam, p in zip(cameras, plans):
+        verts_cam = world_to_camera(verts.double(), cam.R.double(), cam.t.double())   # (V, 3)
+        geo.append(_face_geometry(verts_cam, faces[p.used], cam, cam.K.double(), p.inside, p.flip))
+    plan, geo = _joined(plans, pixels), _Faces.cat(geo)
     n_full = plan.full_pixel.numel()                                        # the unit square, area 1
     yield VisibleRegions(plan.full_pixel, plan.used[plan.full_face], square.expand(n_full, 4, 2),
                          torch.full_like(plan.full_pixel, 4), square.new_ones(n_full))
     for lo, hi in _pixel_chunks(plan.pixel, CHUNK):                         # chunks of whole pixels
-        poly, count, owner = _chunk_pieces(geo, plan, lo, hi, camera, dtype, shift)
+        poly, count, owner = _chunk_pieces(geo, plan, lo, hi, cameras[0], dtype, shift)
         yield VisibleRegions(plan.pixel[lo:hi][owner], plan.used[plan.face[lo:hi][owner]], poly, count,
                              _areas(poly))
 
@@ -729,8 +772,10 @@ def exact_coverage(mesh, camera, face_colors, background=(0.0, 0.0, 0.0)) -> tor
     """The exact box-filtered image of flat-coloured faces: each pixel the integral of the visible colour
     over its unit square, background where nothing is visible.
 
-    mesh: ``verts`` (V, 3), ``faces`` (F, 3); camera: a ``Camera``; face_colors: (F, 3) one colour per face;
-    background: (3,). Returns (H, W, 3) in ``promote(verts, camera, face_colors)``. Same visibility as
+    mesh: ``verts`` (V, 3), ``faces`` (F, 3); camera: a ``Camera``, or a list of N cameras of one image size
+    sharing far and the projection (a camera batch: returns (N, H, W, 3), each image its own call's; the
+    views are planned one by one and clipped together, ``_region_chunks``); face_colors: (F, 3) one colour
+    per face; background: (3,). Returns (H, W, 3) in ``promote(verts, camera, face_colors)``. Same visibility as
     ``rasterize`` without culling (``visible_regions``): the nearest face in float64, except that two faces
     whose nearness (1/z, or -z for an orthographic camera) agrees at a pixel's four corners to 1e-9 of its
     size count as coplanar there, the lower face id in front (``_coplanar``; surfaces about 2e-9 apart in
@@ -740,25 +785,27 @@ def exact_coverage(mesh, camera, face_colors, background=(0.0, 0.0, 0.0)) -> tor
     arrangement changes (a vertex crossing a pixel border, an edge-on face) autograd returns a one-sided
     derivative, always finite (module docstring: at a tie with the pixel grid, the one toward +x, +y).
     """
-    verts, faces = raster._check_inputs(mesh, camera)
+    verts, faces, cameras, batched = raster._check_views(mesh, camera, ("far", "orthographic"))
     colors = as_tensor(face_colors, device=verts.device, name="face_colors")
     if colors.shape != (faces.shape[0], 3):
         raise ValueError(f"face_colors must have shape (F, 3) = ({faces.shape[0]}, 3), got {tuple(colors.shape)}")
     if not torch.isfinite(colors).all():
         raise ValueError("face_colors contains NaN or inf")
-    dtype = torch.promote_types(torch.promote_types(verts.dtype, camera.dtype), colors.dtype)
+    dtype = colors.dtype
+    for x in [verts] + cameras:
+        dtype = torch.promote_types(dtype, x.dtype)
     bg = as_tensor(background, dtype=dtype, device=verts.device, name="background")
     if bg.shape != (3,):
         raise ValueError(f"background must have shape (3,), got {tuple(bg.shape)}")
     if not torch.isfinite(bg).all():
         raise ValueError("background contains NaN or inf")
-    H, W = camera.height, camera.width
+    N, H, W = len(cameras), cameras[0].height, cameras[0].width
     # pixels of one colour all over need no clipping, unless each face's own colour wants its derivative
     keys = None if (colors.requires_grad and torch.is_grad_enabled()) else _color_keys(colors)
     colors = colors.to(dtype)
-    image = torch.zeros(H * W, 3, dtype=dtype, device=verts.device)
-    covered = torch.zeros(H * W, dtype=dtype, device=verts.device)
-    for regions in _region_chunks(verts, faces, camera, dtype, keys):      # Σ area · colour, chunk by chunk
+    image = torch.zeros(N * H * W, 3, dtype=dtype, device=verts.device)
+    covered = torch.zeros(N * H * W, dtype=dtype, device=verts.device)
+    for regions in _region_chunks(verts, faces, cameras, dtype, keys):     # Σ area · colour, chunk by chunk
         image = image.index_add(0, regions.pixel, regions.area[:, None] * colors[regions.face])
         covered = covered.index_add(0, regions.pixel, regions.area)
-    return (image + (1 - covered)[:, None] * bg).view(H, W, 3)
+    return (image + (1 - covered)[:, None] * bg).view(*((N,) if batched else ()), H, W, 3)

@@ -219,10 +219,11 @@ def _check_common(steps, lr, method, snapshot_every):
         raise ValueError(f"snapshot_every must be a positive integer or None, got {snapshot_every!r}")
 
 
-def _silhouette(mesh, camera, method, sigma):
+def _silhouettes(mesh, cameras, method, sigma):
+    """(N, H, W) the silhouettes of the views: soft, all in one call (a camera batch); NMR, one by one."""
     if method == "soft":
-        return soft_rasterize(mesh, camera, mode="silhouette", sigma=sigma, cull_backfaces=False)
-    return nmr_rasterize(mesh, camera, cull_backfaces=False)
+        return soft_rasterize(mesh, cameras, mode="silhouette", sigma=sigma, cull_backfaces=False)
+    return torch.stack([nmr_rasterize(mesh, c, cull_backfaces=False) for c in cameras])
 
 
 def start_verts(start, seed) -> tuple:
@@ -265,7 +266,8 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
 
     Args:
         target_mesh: a Mesh (``verts`` (V, 3), ``faces`` (F, 3)); only its hard silhouettes are used.
-        cameras: a non-empty list of ``Camera`` (the training views), all of one image size.
+        cameras: a non-empty list of ``Camera`` (the training views), all of one image size; for ``"soft"``
+            also of one near, far and projection (each step renders them in one call, a camera batch).
         steps: Adam steps. method: ``"soft"`` (soft rasterization, sharpness ``sigma`` in NDC units, see
             ``course.soft``) or ``"nmr"`` (hard forward, Kato et al.'s approximate gradient).
         lr: Adam's learning rate on the per-vertex offset (world units); ``lr_end``: it decays
@@ -340,7 +342,7 @@ def fit_silhouettes(target_mesh, cameras, *, steps: int = 200, method: str = "so
         if step == steps:
             break
         mesh = Mesh(verts, faces)
-        pred = torch.stack([_silhouette(mesh, c, method, sigmas[step]) for c in cameras])   # (N, H, W)
+        pred = _silhouettes(mesh, cameras, method, sigmas[step])           # (N, H, W)
         sil = losses.silhouette_iou_loss(pred.clamp(0, 1), targets, reduction="mean")
         loss = sil
         if smoothness:
@@ -436,27 +438,24 @@ def coverage_masks(mesh, cameras) -> torch.Tensor:
 
 
 def _reynolds_backward(image_loss, verts, faces, colors, cameras, targets, background):
-    """The image term's gradient by lecture 09's exact boundary integral on the box-filtered images, per view.
-    The image is ``coverage.exact_coverage`` with the face colours as autograd leaves: one pass gives the image,
-    the loss, dL/dimage (the weights) and dL/dcolours (each face's weighted areas, exact: the image is linear
-    in them); ``visibility.image_gradient(method="reynolds")`` turns the weights into dL/dverts (the edges'
-    motion). Summed over the views, ``Σ g_v · v + Σ g_c · c(v)`` is backpropagated, so the colours' own
-    dependence on the vertices (the shading follows the normals) reaches the optimiser too. Returns the image
-    term (a tensor)."""
+    """The image term's gradient by lecture 09's exact boundary integral on the box-filtered images.
+    The images are ``coverage.exact_coverage`` of every view in one call (a camera batch) with the face colours
+    as autograd leaves: one pass gives the images, the loss, dL/dimage (the weights) and dL/dcolours (each
+    face's weighted areas, exact: the image is linear in them); ``visibility.image_gradient(method="reynolds")``
+    of the batch turns the weights into dL/dverts summed over the views (the edges' motion). Then
+    ``g_v · v + g_c · c(v)`` is backpropagated, so the colours' own dependence on the vertices (the shading
+    follows the normals) reaches the optimiser too. Returns the image term (a tensor)."""
     from .coverage import exact_coverage
     from .visibility import image_gradient
     mesh = Mesh(verts.detach(), faces)
     flat, bg = colors.detach().requires_grad_(True), _background3(background, verts)
-    g_verts, g_colors, total = torch.zeros_like(mesh.verts), torch.zeros_like(flat), 0.0
-    for cam, target in zip(cameras, targets):
-        with torch.enable_grad():
-            image = exact_coverage(mesh, cam, flat, bg)
-            loss = image_loss(image, target)
-            weights, gc = torch.autograd.grad(loss, (image, flat))
-        gv = image_gradient(mesh, cam, flat.detach(), weights, method="reynolds", background=bg)
-        g_verts, g_colors, total = g_verts + gv.to(verts.dtype), g_colors + gc, total + loss.detach()
-    ((g_verts * verts).sum() + (g_colors * colors).sum()).backward()
-    return total
+    with torch.enable_grad():
+        images = exact_coverage(mesh, cameras, flat, bg)                   # (N, H, W, 3)
+        loss = sum(image_loss(image, target) for image, target in zip(images, targets))
+        weights, g_colors = torch.autograd.grad(loss, (images, flat))
+    g_verts = image_gradient(mesh, cameras, flat.detach(), weights, method="reynolds", background=bg)
+    ((g_verts.to(verts.dtype) * verts).sum() + (g_colors * colors).sum()).backward()
+    return loss.detach()
 
 
 def fit_mesh_from_images(target_mesh, *, n_views: int = 12, seed: int = 0, size: int = 64, steps: int = 150,
@@ -549,9 +548,9 @@ def fit_mesh_from_images(target_mesh, *, n_views: int = 12, seed: int = 0, size:
             regular = regular + smoothness * losses.smoothness_loss(verts, faces)
         opt.zero_grad()
         if gradient == "soft":
-            term = sum(image_loss(soft_rasterize(mesh, c, mode="color", sigma=sigmas[step], gamma=gamma,
-                                                 face_colors=colors, background=background), t)
-                       for c, t in zip(cameras, targets))
+            images = soft_rasterize(mesh, cameras, mode="color", sigma=sigmas[step], gamma=gamma,
+                                    face_colors=colors, background=background)   # (N, H, W, 3), one call
+            term = sum(image_loss(image, t) for image, t in zip(images, targets))
             (term + regular).backward()
         else:
             if regular.requires_grad:

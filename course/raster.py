@@ -241,6 +241,33 @@ def _check_inputs(mesh, camera):
     return verts, faces
 
 
+def _check_views(mesh, camera, shared=()):
+    """``_check_inputs`` for a renderer that draws one camera or a batch: ``camera`` is a ``Camera`` or a list
+    (or tuple) of them, all of one image size and equal in the attributes named in ``shared`` (such as
+    "near", "far", "orthographic": what the renderer takes from one camera for all). Returns verts, faces,
+    the cameras as a list and whether a batch was given (a batch of one is still a batch: (1, H, W) out).
+    A ValueError names the camera that differs, or the empty list."""
+    if not isinstance(camera, (list, tuple)):
+        return (*_check_inputs(mesh, camera), [camera], False)
+    cameras = list(camera)
+    if not cameras:
+        raise ValueError("cameras is empty: give a Camera, or a list of at least one")
+    for k, c in enumerate(cameras):
+        if not _is_camera(c):
+            raise TypeError(f"cameras[{k}] must be a course.camera.Camera, got {type(c).__name__}")
+    first = cameras[0]
+    for k, c in enumerate(cameras[1:], 1):
+        if (c.width, c.height) != (first.width, first.height):
+            raise ValueError(f"the cameras of a batch must share one image size: cameras[0] is "
+                             f"{first.width}x{first.height}, cameras[{k}] is {c.width}x{c.height} (render "
+                             "each size in its own call)")
+        for name in shared:
+            if getattr(c, name) != getattr(first, name):
+                raise ValueError(f"the cameras of a batch must share {name}: cameras[0] has "
+                                 f"{name}={getattr(first, name)}, cameras[{k}] has {name}={getattr(c, name)}")
+    return (*_check_inputs(mesh, first), cameras, True)
+
+
 def _camera_space(verts, camera):
     """World (V, 3) → camera space in float64, detached: coverage is decided in double precision."""
     return world_to_camera(verts.detach().double(), camera.R.detach().double(), camera.t.detach().double())
@@ -290,13 +317,14 @@ def _clip_near(verts_cam, faces, face_ids, near):
 
 
 def _project(p_cam, camera, K):
-    """Camera space (..., 3) → screen (..., 2) and the screen-affine quantity q (...)."""
+    """Camera space (..., 3) → screen (..., 2) and the screen-affine quantity q (...). K: (3, 3), or (N, 3, 3)
+    with p_cam (N, M, 3): a batch, each row of points through its own K."""
     z = p_cam[..., 2]
     if camera.orthographic:
         xy1, q = torch.cat([p_cam[..., :2], torch.ones_like(z)[..., None]], -1), z
     else:
         xy1, q = p_cam / z[..., None], 1 / z
-    return (xy1 @ K.T)[..., :2], q
+    return (xy1 @ K.mT)[..., :2], q
 
 
 def _cross(a, b):

@@ -45,6 +45,12 @@ depth. Along σ = γ² both go to 0 together and the image tends to the hard
 rasterizer's, at pixels farther than a pixel from any edge (``tests/test_soft.py`` measures both).
 
 It gives a gradient with respect to ``mesh.verts``, the colours, and the camera's K, R, t.
+
+**A camera batch** (one mesh, a list of N cameras: a fit's views) is one call, not N: every view's triangles
+are projected together (``_screen_views``), then each triangle's pairs are listed in its own image (its rows
+and columns only: no blur crosses into another view) and numbered ``view · H · W + pixel``, and from there
+the pair search, the thresholds and the chunked sums run once over all views' pairs as over one image of
+N · H · W pixels. Per pixel the terms are those of the call for its view alone, added in the same order.
 """
 from __future__ import annotations
 
@@ -53,8 +59,7 @@ import math
 import torch
 from torch.utils.checkpoint import checkpoint
 
-from .camera import world_to_camera
-from .raster import _camera_space, _check_inputs, _clip_near, _project
+from .raster import _check_views, _clip_near, _project
 from .scan import _expand, _max3, _min3
 from .tensors import _check_finite, _check_flag, _check_real, as_tensor
 from .textures import sample_texture
@@ -68,48 +73,72 @@ CHUNK = 1 << 18      # (pixel, face) pairs computed at once: bounds the memory o
 # -------------------------------------------------------------------------------- shared: screen triangles
 
 def _screen_faces(verts, faces, camera, cull_backfaces, attr=None):
-    """Faces projected to the screen, differentiable in verts, K, R and t.
+    """The faces projected by one camera: ``_screen_views`` of a batch of one, without the view ids.
+    Returns xy (T, 3, 2), q (T, 3), face (T,) and attr (T, 3, C) or None."""
+    return _screen_views(verts, faces, [camera], cull_backfaces, attr)[:4]
+
+
+def _screen_views(verts, faces, cameras, cull_backfaces, attr=None):
+    """Faces projected to the screens of N cameras at once, differentiable in verts and every camera's K, R, t.
 
     Faces behind the camera or beyond the far plane are dropped, back faces too if asked; faces crossing
     the near plane are clipped there in camera space (``raster._clip_near``), so nothing is divided by a
     depth <= 0. The decisions are made on detached float64 copies (as ``rasterize`` makes them).
+    cameras: a list of N cameras sharing near, far and orthographic (each has its own K, R, t); every step
+    runs on all of them together, one row of (N, V, 3) camera-space vertices per camera.
     attr: optional (V, C) per-vertex values (vertex colours), clipped along with the positions.
     Returns xy (T, 3, 2) pixels, q (T, 3) = 1/z (perspective) or z (orthographic), face (T,) ids,
-    and attr (T, 3, C) or None.
+    attr (T, 3, C) or None, and view (T,) the camera each triangle is seen by: the whole faces view by view,
+    then the clipped ones (so each view's triangles come in the order a call for that view alone gives).
     """
-    dtype = torch.promote_types(verts.dtype, camera.dtype)
-    K, R, t = camera.K.to(dtype), camera.R.to(dtype), camera.t.to(dtype)
-    verts_cam = world_to_camera(verts.to(dtype), R, t)                      # (V, 3) differentiable
+    cam, N, V, F = cameras[0], len(cameras), verts.shape[0], faces.shape[0]   # cam: near, far, orthographic
+    dtype = _dtype(verts, cameras)
+    K, R, t = (torch.stack([getattr(c, name) for c in cameras]).to(dtype) for name in ("K", "R", "t"))
+    verts_cam = verts.to(dtype) @ R.mT + t[:, None]                         # (N, V, 3) differentiable
     with torch.no_grad():
-        v = _camera_space(verts, camera)[faces]                             # (F, 3, 3) float64
+        R64, t64 = R.detach().double(), t.detach().double()
+        v = (verts.detach().double() @ R64.mT + t64[:, None])[:, faces].reshape(N * F, 3, 3)   # float64
         z = v[..., 2]
-        keep = (_max3(z) >= camera.near) & (_min3(z) <= camera.far)
+        keep = (_max3(z) >= cam.near) & (_min3(z) <= cam.far)
         if cull_backfaces:                                                  # front faces are CCW to the viewer
             normal = torch.linalg.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-            keep &= (normal[:, 2] < 0) if camera.orthographic else ((normal * v[:, 0]).sum(-1) < 0)
-        whole = (keep & (_min3(z) >= camera.near)).nonzero().squeeze(1)
-        crossing = (keep & (_min3(z) < camera.near)).nonzero().squeeze(1)
-    xy_v, q_v = _project_safe(verts_cam, camera, K)                         # each vertex projected once
-    idx = faces.index_select(0, whole)                                      # (T, 3)
-    xy, q, face = xy_v[idx], q_v[idx], whole
-    a = None if attr is None else attr.to(dtype)[idx]
+            keep &= (normal[:, 2] < 0) if cam.orthographic else ((normal * v[:, 0]).sum(-1) < 0)
+        whole = (keep & (_min3(z) >= cam.near)).nonzero().squeeze(1)      # view * F + face
+        crossing = (keep & (_min3(z) < cam.near)).nonzero().squeeze(1)
+    xy_v, q_v = _project_safe(verts_cam, cam, K)                            # each vertex projected once a view
+    view, face = whole // F, whole % F
+    corner = faces.index_select(0, face)                                    # (T, 3)
+    idx = corner + V * view[:, None]                                        # rows of the (N * V) vertices
+    xy, q = xy_v.reshape(N * V, 2)[idx], q_v.reshape(N * V)[idx]
+    a = None if attr is None else attr.to(dtype)[corner]
     if crossing.numel():
         # clip the attributes with the positions: _clip_near interpolates every column along the edge
-        full = verts_cam if attr is None else torch.cat([verts_cam, attr.to(dtype)], 1)
-        tri, ids = _clip_near(full, faces, crossing, camera.near)           # (C, 3, 3 + attr)
-        xy_c, q_c = _project(tri[..., :3], camera, K)
-        xy, q, face = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids])
+        full = verts_cam if attr is None else torch.cat([verts_cam, attr.to(dtype).expand(N, V, -1)], 2)
+        rows = (faces + V * torch.arange(N, device=faces.device)[:, None, None]).reshape(N * F, 3)
+        tri, ids = _clip_near(full.reshape(N * V, -1), rows, crossing, cam.near)   # (C, 3, 3 + attr)
+        xy_c, q_c = _project(tri[..., :3], cam, K[ids // F])
+        xy, q, face, view = torch.cat([xy, xy_c]), torch.cat([q, q_c]), torch.cat([face, ids % F]), \
+            torch.cat([view, ids // F])
         a = None if attr is None else torch.cat([a, tri[..., 3:]])
-    return xy, q, face, a
+    return xy, q, face, a, view
+
+
+def _dtype(verts, cameras):
+    """The working dtype: promote(verts, every camera)."""
+    dtype = verts.dtype
+    for c in cameras:
+        dtype = torch.promote_types(dtype, c.dtype)
+    return dtype
 
 
 def _project_safe(verts_cam, camera, K):
     """``raster._project`` of every vertex, differentiably, those far behind the near plane (z < near / 2)
     first replaced by a harmless point: no face uses them, but dividing by their z <= 0 would send
-    0 · inf = NaN into the backward pass. Returns xy (V, 2) and q (V,)."""
+    0 · inf = NaN into the backward pass. verts_cam: (V, 3) with K (3, 3), or (N, V, 3) with K (N, 3, 3).
+    Returns xy (..., V, 2) and q (..., V)."""
     if not camera.orthographic:
-        ok = verts_cam[:, 2].detach() >= 0.5 * camera.near
-        verts_cam = torch.where(ok[:, None], verts_cam, torch.ones_like(verts_cam))
+        ok = verts_cam[..., 2].detach() >= 0.5 * camera.near
+        verts_cam = torch.where(ok[..., None], verts_cam, torch.ones_like(verts_cam))
     return _project(verts_cam, camera, K)
 
 
@@ -146,13 +175,17 @@ def _pad(xy, radius):
     return 1e-9 * (1 + xy.abs().amax((1, 2))) + radius
 
 
-def _triangle_groups(xy, radius, W, H):
+def _triangle_groups(xy, radius, W, H, images: int = 1):
     """Consecutive groups ``(lo, hi)`` of the triangles, about CHUNK candidate pairs each. A triangle's pairs
-    lie in its bounding box widened by the radius, whose pixel count bounds their number."""
+    lie in its bounding box widened by the radius, whose pixel count bounds their number.
+    images: the triangles of a batch of that many images are cut into at least as many groups (about one
+    image's pairs each, at most CHUNK): the vectors a call per image would work on. One group of the whole
+    batch ran up to 1.4 times slower per pair on a CPU, its vectors too long for the caches."""
     pad = _pad(xy, radius)[:, None]
     first = torch.ceil(xy.amin(1) - pad - 0.5).clamp(min=0)                # (T, 2) first column, first row
     last = torch.minimum(torch.floor(xy.amax(1) + pad - 0.5), xy.new_tensor([W - 1, H - 1]))
-    return _groups((last - first + 1).clamp(min=0).prod(1).long(), CHUNK)
+    count = (last - first + 1).clamp(min=0).prod(1).long()                  # (T,)
+    return _groups(count, min(CHUNK, max(1, -(-int(count.sum()) // images))))   # ⌈pairs / images⌉
 
 
 def _candidate_pairs(xy, radius, W, H):
@@ -196,10 +229,12 @@ def _candidate_pairs(xy, radius, W, H):
     return pixel, tri_of_seg[seg_of_px]
 
 
-def _pair_terms(xy, tri, pixel, W, s, bary: bool = True):
+def _pair_terms(xy, tri, pixel, W, s, bary: bool = True, H=None):
     """Signed, scaled squared distance and clamped barycentrics of each pair's pixel centre.
 
-    xy: (T, 3, 2) triangles on screen (either winding); tri, pixel: (N,) the pairs; s: 1/σ_px.
+    xy: (T, 3, 2) triangles on screen (either winding); tri, pixel: (N,) the pairs; s: 1/σ_px. H: None (the
+    pixel ids are one image's), or the image height when they run over a batch of images (view · H · W +
+    the pixel's own id): the row is then taken modulo H.
     Returns x (N,) = δ d² / σ_px (δ = +1 inside, -1 outside) and, if asked, bary: three (N,) tensors, the
     screen-space barycentrics clamped to [0, 1] and renormalised (the paper's choice: outside a face, its
     attributes are those of the nearest point). Finite for degenerate triangles (zero area: never inside,
@@ -207,7 +242,7 @@ def _pair_terms(xy, tri, pixel, W, s, bary: bool = True):
     tensors.
     """
     px = (pixel % W).to(xy.dtype) + 0.5                                     # (N,) pixel centre
-    py = (pixel // W).to(xy.dtype) + 0.5
+    py = (pixel // W if H is None else pixel // W % H).to(xy.dtype) + 0.5
     X = [xy[:, k, 0].index_select(0, tri) for k in range(3)]                # (N,) each corner's x
     Y = [xy[:, k, 1].index_select(0, tri) for k in range(3)]
     d2, cross = None, []
@@ -336,7 +371,10 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     """Soft rasterization (Liu et al. 2019): a silhouette or colour image smooth in every vertex position.
 
     mesh: ``verts`` (V, 3) world space, ``faces`` (F, 3) int64; camera: a ``Camera`` (perspective or
-    orthographic). mode: ``"silhouette"`` returns (H, W), the probabilistic OR ``1 - Π (1 - D_j)``;
+    orthographic), or a list of N cameras of one image size sharing near, far and the projection (a camera
+    batch: the images come back stacked, (N, H, W) or (N, H, W, C), each equal to its own call's, computed in
+    one pass: ``_screen_views``, then every view's pairs together, each kept to its own view's pixels).
+    mode: ``"silhouette"`` returns (H, W), the probabilistic OR ``1 - Π (1 - D_j)``;
     ``"color"`` returns (H, W, C), the softmax over depth with the background as one more term, the colour of
     a face being ``face_colors`` (F, C) or ``vertex_colors`` (V, C) interpolated with perspective-correct
     barycentrics (clamped to the triangle outside it); finite, integers are taken as floats.
@@ -370,13 +408,14 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     cull_backfaces: skip faces facing away (front faces are CCW). Faces crossing the near plane are clipped.
     A mesh without faces gives the background. Memory is bounded by CHUNK pairs, not by the number of
     candidates. Differentiable w.r.t. verts, the colours, the texture, its uvs, specular and the camera's
-    K, R and t; dtype and device of the inputs.
+    (every camera's) K, R and t; dtype and device of the inputs.
     """
     sigma, gamma, threshold, eps = _check_soft(mode, sigma, gamma, threshold, eps, cutoff, depth)
     cull_backfaces = _check_flag(cull_backfaces, "cull_backfaces")
-    verts, faces = _check_inputs(mesh, camera)
+    verts, faces, cameras, batched = _check_views(mesh, camera, ("near", "far", "orthographic"))
+    camera, N = cameras[0], len(cameras)                                    # its near, far, projection: all's
     H, W = camera.height, camera.width
-    dtype = torch.promote_types(verts.dtype, camera.dtype)
+    dtype = _dtype(verts, cameras)
     if blend not in ("softmax", "alpha"):
         raise ValueError(f"blend must be 'softmax' or 'alpha', got {blend!r}")
     colors = bg = texture_ = vert_attr = None
@@ -388,13 +427,17 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
                          verts.device)
     elif any(x is not None for x in (texture, uvs, specular)):
         raise ValueError("texture, uvs and specular are for mode='color'; a silhouette has no colours")
-    xy, q, face, attr = _screen_faces(verts, faces, camera, cull_backfaces, vert_attr)
+    # every view's triangles together; each one's pairs go to its own view's pixels, view · H · W onwards
+    xy, q, face, attr, view = _screen_views(verts, faces, cameras, cull_backfaces, vert_attr)
+    base = view * (H * W) if N > 1 else None                                # (T,) first pixel id of its view
+    P = N * H * W                                                           # pixels in all
+    shape = (N, H, W) if batched else (H, W)
     s = 4.0 / (W * W * sigma)                                               # 1 / σ_px
     x_max = math.log(1 / threshold)                                         # sigmoid(-x) >= thr ⇒ x <= this
     # cutoff="absolute": a pair is dropped exactly where D = sigmoid(x) < threshold, i.e. x < x_cut
     x_cut = math.log(threshold) - math.log1p(-threshold) if cutoff == "absolute" else None
     if mode == "silhouette":
-        return _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype).view(H, W)
+        return _soft_silhouette(xy, base, P, W, H, s, x_max, x_cut, dtype).view(shape)
     if texture_ is not None:                                                # (T, 3, A) corner attributes:
         if face_attr is not None:                                           # [uv | per-face colour, specular]
             attr = torch.cat([attr, face_attr.to(attr.dtype)[face][:, None].expand(-1, 3, -1)], 2)
@@ -405,52 +448,62 @@ def soft_rasterize(mesh, camera, *, mode: str = "silhouette", sigma: float = 1e-
     x_reach = x_max + (_max3(near) - eps).clamp(min=0) / gamma * (x_cut is None)
     pixel, tri, top, z_top = _color_pairs(xy.detach(), near, (x_reach / s).sqrt(), W, H, s, gamma, eps,
                                           math.log(threshold), x_cut,
-                                          q.detach().double() if depth == "linear" else None, camera)
+                                          q.detach().double() if depth == "linear" else None, camera, base, N)
     C = bg.shape[0]
-    w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (H*W,) the background's weight
+    w_bg = torch.exp((eps / gamma - top).to(dtype))                        # (P,) the background's weight
     if blend == "alpha":                                                    # the faces alone: no background term
         w_bg = torch.zeros_like(w_bg)
     # the background's term plus every kept pair's w and w c, summed per pixel CHUNK pairs at a time; no
     # per-pair tensor outlives its chunk, in the forward or the backward pass (``_ColorSums``)
     num, den = _ColorSums.apply(w_bg[:, None] * bg, w_bg, xy, q, attr, texture_, face, tri, pixel,
-                                (top - z_top / gamma).to(dtype), z_top.to(dtype), (W, s, gamma, camera, depth, C))
+                                (top - z_top / gamma).to(dtype), z_top.to(dtype),
+                                (W, H if N > 1 else None, s, gamma, camera, depth, C))
     if blend == "softmax":
-        return (num / den[:, None]).view(H, W, C)                           # (H*W, C) / (H*W, 1)
-    faces_color = num / torch.where(den > 0, den, torch.ones_like(den))[:, None]   # (H*W, C); 0 where no face
-    alpha = _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype)[:, None]      # (H*W, 1)
-    return (alpha * faces_color + (1 - alpha) * bg).view(H, W, C)
+        return (num / den[:, None]).view(*shape, C)                         # (P, C) / (P, 1)
+    faces_color = num / torch.where(den > 0, den, torch.ones_like(den))[:, None]   # (P, C); 0 where no face
+    alpha = _soft_silhouette(xy, base, P, W, H, s, x_max, x_cut, dtype)[:, None]   # (P, 1)
+    return (alpha * faces_color + (1 - alpha) * bg).view(*shape, C)
 
 
-def _soft_silhouette(xy, W, H, s, x_max, x_cut, dtype):
-    """(H*W,) the probabilistic OR ``1 - Π (1 - D_j)`` of the screen triangles xy (T, 3, 2)."""
+def _soft_silhouette(xy, base, P, W, H, s, x_max, x_cut, dtype):
+    """(P,) the probabilistic OR ``1 - Π (1 - D_j)`` of the screen triangles xy (T, 3, 2) on P = N·H·W
+    pixels: N images of H x W, triangle j drawn into the one starting at pixel id base (T,) (view · H · W;
+    None: one image)."""
     radius = torch.full_like(xy[:, 0, 0], math.sqrt(x_max / s), dtype=torch.float64)   # (T,) pixels
     xy64 = xy.detach().double()
-    groups = _triangle_groups(xy64, radius, W, H)
-    log_empty = torch.zeros(H * W, dtype=dtype, device=xy.device)
+    images = P // (H * W)
+    groups = _triangle_groups(xy64, radius, W, H, images)
+    log_empty = torch.zeros(P, dtype=dtype, device=xy.device)
+    recompute = len(groups) > images                                        # more than one group an image
     for lo, hi in groups:
-        # each group of triangles adds its log(1 - D_j) to its pixels; with several groups, a group's
-        # pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all)
-        log_empty = log_empty + _checkpointed(len(groups) > 1, _silhouette_group, xy, xy64, radius, lo, hi,
-                                              W, H, s, x_cut)
+        # each group of triangles adds its log(1 - D_j) to its pixels; with more groups than images, a
+        # group's pairs and graph are rebuilt during backward instead of kept (memory: one group's, not all;
+        # up to one group an image is kept, what a call per image would keep)
+        log_empty = log_empty + _checkpointed(recompute, _silhouette_group, xy, xy64, radius, base, lo, hi,
+                                              P, W, H, s, x_cut)
     return -torch.expm1(log_empty)                                          # 1 - Π (1 - D_j), stably
 
 
-def _silhouette_group(xy, xy64, radius, lo, hi, W, H, s, x_cut=None):
-    """(H*W,) the sum of log(1 - D_j) over the triangles lo..hi-1 at each pixel: their candidates, then
-    ``_silhouette_terms``."""
+def _silhouette_group(xy, xy64, radius, base, lo, hi, P, W, H, s, x_cut=None):
+    """(P,) the sum of log(1 - D_j) over the triangles lo..hi-1 at each pixel: their candidates in their own
+    image (so no triangle reaches into another view's pixels), then ``_silhouette_terms``."""
     pixel, tri = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)       # tri: 0..hi-lo-1
     log_miss = _silhouette_terms(tri, pixel, xy[lo:hi], W, s, x_cut)
-    return torch.zeros(H * W, dtype=xy.dtype, device=xy.device).index_add(0, pixel, log_miss)
+    if base is not None:
+        pixel = pixel + base[lo:hi].index_select(0, tri)                    # the batch's pixel ids
+    return torch.zeros(P, dtype=xy.dtype, device=xy.device).index_add(0, pixel, log_miss)
 
 
-def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr, x_cut=None, q=None, camera=None):
+def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr, x_cut=None, q=None, camera=None, base=None,
+                 images: int = 1):
     """Which pairs matter in colour mode, without gradients. xy: (T, 3, 2) detached, in the dtype the
     differentiable pass computes in (so both agree on what is kept); near: (T, 3) float64 corner z;
     radius: (T,) the candidate radius in pixels. Every candidate's log-weight is
     ``log_w = logsigmoid(x) + z/γ`` (float64: z/γ reaches 1e5); per pixel ``top`` is the largest log_w (at
     least the background's ε/γ) and ``z_top`` the largest z; a pair is kept if log_w - top >= log_thr.
     Returns pixel (N,), tri (N,) of the kept pairs (grouped by triangle; int32 when the image and the mesh
-    allow, half the memory of int64) and top, z_top (H*W,) float64.
+    allow, half the memory of int64) and top, z_top (P,) float64, P = images · H · W pixels: base (T,) the
+    first pixel id of each triangle's image in a batch of ``images`` (None: one image), where its pairs go.
     x_cut: None (the relative cut-off above), or the absolute one: a pair is kept iff its x >= x_cut (its
     D >= threshold), whatever the other weights. q: None (z is affine on screen: interpolated from ``near``),
     or (T, 3) float64 corner q, interpolated and then turned into z by ``_nearness(.., camera, "linear")``.
@@ -462,14 +515,15 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr, x_cut=None, q=N
     it will be below it at the end too, and is dropped at once; the few survivors are checked again against
     the final ``top`` (and pruned on the way whenever they pile up)."""
     xy64 = xy.double()
-    top = torch.full((H * W,), eps / gamma, dtype=torch.float64, device=xy.device)
-    z_top = torch.full((H * W,), eps, dtype=torch.float64, device=xy.device)
+    P = images * H * W
+    top = torch.full((P,), eps / gamma, dtype=torch.float64, device=xy.device)
+    z_top = torch.full((P,), eps, dtype=torch.float64, device=xy.device)
     # the survivors are stored as int32 where every pixel and triangle id fits (the candidates stay int64:
     # scatter_reduce_ wants int64 indices); at a large σ there are tens of millions of them
-    index = torch.int32 if max(H * W, xy.shape[0]) < 2 ** 31 else torch.int64
+    index = torch.int32 if max(P, xy.shape[0]) < 2 ** 31 else torch.int64
     kept = _Survivors(index, xy.device)
     with torch.no_grad():
-        for lo, hi in _triangle_groups(xy64, radius, W, H):
+        for lo, hi in _triangle_groups(xy64, radius, W, H, images):
             pix, t = _candidate_pairs(xy64[lo:hi], radius[lo:hi], W, H)
             t = t + lo                                                      # the group's → the mesh's ids
             x, b = _pair_terms(xy, t, pix, W, s)                            # as stage B computes them
@@ -480,6 +534,8 @@ def _color_pairs(xy, near, radius, W, H, s, gamma, eps, log_thr, x_cut=None, q=N
                 qt = q.index_select(0, t)                                   # linear depth: q, then z
                 z = _nearness(b[0] * qt[:, 0] + b[1] * qt[:, 1] + b[2] * qt[:, 2], camera, "linear")
             log_w = torch.nn.functional.logsigmoid(x.double()) + z / gamma
+            if base is not None:
+                pix = pix + base.index_select(0, t)                         # the batch's pixel ids
             if x_cut is not None:                                           # absolute: D < threshold is dropped
                 log_w = torch.where(x.double() >= x_cut, log_w, -math.inf)
             z_top.scatter_reduce_(0, pix, z, reduce="amax")
@@ -548,11 +604,11 @@ class _ColorSums(torch.autograd.Function):
     and forgets it too (a checkpoint per chunk, without keeping a per-pair output). The sums are added in
     the pairs' order, the same numbers as one ``index_add`` over all of them.
 
-    Inputs: bg_num (H*W, C) and bg_den (H*W,), the background's term (where the sums start); xy (T, 3, 2),
-    q (T, 3), colors ((F, C) face colours or (T, 3, A) corner attributes) and texture (Ht, Wt, C) or None:
-    the differentiable ones; face (T,), tri and pixel (N,) the kept pairs; top, z_top (H*W,); rest:
-    (W, s, gamma, camera, depth, C), the other arguments of ``_color_terms``. Differentiable once (no double
-    backward)."""
+    Inputs: bg_num (P, C) and bg_den (P,), the background's term (where the sums start) on the P pixels of
+    the image or batch; xy (T, 3, 2), q (T, 3), colors ((F, C) face colours or (T, 3, A) corner attributes)
+    and texture (Ht, Wt, C) or None: the differentiable ones; face (T,), tri and pixel (N,) the kept pairs;
+    top, z_top (P,); rest: (W, H, s, gamma, camera, depth, C), the other arguments of ``_color_terms``.
+    Differentiable once (no double backward)."""
 
     @staticmethod
     def forward(ctx, bg_num, bg_den, xy, q, colors, texture, face, tri, pixel, top, z_top, rest):
@@ -600,11 +656,12 @@ def _silhouette_terms(tri, pixel, xy, W, s, x_cut=None):
     return log_miss if x_cut is None else torch.where(x.detach().double() >= x_cut, log_miss, 0.0)
 
 
-def _color_terms(tri, pixel, xy, q, face, colors, texture, top, z_top, W, s, gamma, camera, depth, C):
+def _color_terms(tri, pixel, xy, q, face, colors, texture, top, z_top, W, H, s, gamma, camera, depth, C):
     """Each pair's softmax weight ``D exp((z - z_top)/γ - top)`` (N,) and weighted colour (N, C); colors is
     (F, C) face colours or (T, 3, A) the screen triangles' corner attributes: vertex colours, or with a
-    texture (Ht, Wt, C) the layout of ``_pair_colors``. top, z_top: (H*W,) per pixel."""
-    x, b = _pair_terms(xy, tri, pixel, W, s)                                # (N,), 3 × (N,)
+    texture (Ht, Wt, C) the layout of ``_pair_colors``. top, z_top: (P,) per pixel. H: None for one image,
+    the height of each for a batch (``_pair_terms``)."""
+    x, b = _pair_terms(xy, tri, pixel, W, s, H=H)                           # (N,), 3 × (N,)
     qt = [q[:, k].index_select(0, tri) for k in range(3)]                   # 3 × (N,)
     z = _nearness(b[0] * qt[0] + b[1] * qt[1] + b[2] * qt[2], camera, depth)   # q is affine on screen
     w = torch.exp(torch.nn.functional.logsigmoid(x) + (z - z_top[pixel]) / gamma - top[pixel])   # <= ~1

@@ -64,12 +64,17 @@ position (equal to 1e-9 of the mesh's size, ``boundary._weld``) as one point: ea
 derivative of moving the point, all its copies together, by every method (finite differences move them all).
 An optimiser that steps along it keeps the copies together.
 
+A camera batch (one mesh, a list of cameras, weights (N, H, W, 3)): the gradient of the sum over the views,
+by "reynolds" or "edge_sampling" in one call (``boundary_gradient`` of the views' ``_Problem``s: the per-mesh
+work once, each view's edges and samples, one autograd pass).
+
 The boundary machinery (the edges on screen, their visible pieces, the z-buffer asked beside them, the
 interior term of affine colours) lives in ``course.boundary``; this module is the front door and the
 methods that differentiate whole images.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -80,7 +85,7 @@ from .camera import Camera
 from .coverage import _region_chunks, exact_coverage
 from .coverage_affine import _Field, exact_affine_coverage, polygon_centroids
 from .discontinuities import _color_keys
-from .raster import _check_inputs, interpolate, rasterize
+from .raster import _check_inputs, _check_views, interpolate, rasterize
 from .nmr import nmr_image, nmr_rasterize
 from .soft import soft_rasterize
 from .tensors import _check_count, as_tensor
@@ -107,7 +112,8 @@ def _count(x, name, most, minimum=1):
 # ------------------------------------------------------------------------------------ parameters
 
 class _Problem:
-    """The inputs of ``image_gradient``, checked, with the parameters as leaf tensors that require grad."""
+    """The inputs of ``image_gradient``, checked, with the parameters as leaf tensors that require grad.
+    One camera's; a camera batch is a list of them (``batch``), one per view, sharing the mesh's part."""
 
     def __init__(self, mesh, camera, colors, weights, background, model, dtype=None):
         verts, faces = _check_inputs(mesh, camera)
@@ -139,11 +145,43 @@ class _Problem:
         self.params = {"verts": verts.detach().to(self.dtype), "R": camera.R.detach().to(self.dtype),
                        "t": camera.t.detach().to(self.dtype), "focal": camera.K[0, 0].detach().to(self.dtype),
                        "colors": c.detach().to(self.dtype)}
+        self.shared = {}                                                    # per-mesh results (``boundary``)
 
-    def leaves(self, names):
+    @classmethod
+    def batch(cls, mesh, cameras, colors, weights, background, model, dtype=None) -> list:
+        """The problems of a camera batch: cameras a list of N ``Camera``s of one image size, weights
+        (N, H, W, 3), one image of weights each. The first is checked in full, the others are its ``view``s."""
+        verts, _, cameras, _ = _check_views(mesh, cameras)
+        N, H, W = len(cameras), cameras[0].height, cameras[0].width
+        w = as_tensor(weights, device=verts.device, name="weights")
+        if w.shape != (N, H, W, 3):
+            raise ValueError(f"weights must have shape (N, H, W, 3) = ({N}, {H}, {W}, 3) for {N} cameras of "
+                             f"{W}x{H}, got {tuple(w.shape)}")
+        if not torch.isfinite(w).all():
+            raise ValueError("weights contains NaN or inf")
+        if dtype is None:                                                   # promote(verts, every camera)
+            dtype = verts.dtype
+            for c in cameras:
+                dtype = torch.promote_types(dtype, c.dtype)
+        first = cls(mesh, cameras[0], colors, w[0], background, model, dtype)
+        return [first] + [first.view(c, w[k]) for k, c in enumerate(cameras[1:], 1)]
+
+    def view(self, camera, weights) -> "_Problem":
+        """The problem of another camera of a batch, weights (H, W, 3) its image's: the same mesh, colours and
+        background, the same per-mesh work (``weld``, ``shared``: computed once for all the views)."""
+        prob = copy.copy(self)
+        prob.camera0, prob.weights = camera, weights.to(self.dtype)
+        prob.params = dict(self.params, R=camera.R.detach().to(self.dtype), t=camera.t.detach().to(self.dtype),
+                           focal=camera.K[0, 0].detach().to(self.dtype))
+        return prob
+
+    def leaves(self, names, like=None):
         """Fresh copies of the parameters, those in ``names`` requiring grad. The vertices are
         ``verts + shift[weld]``: one shift (U, 3), a leaf, per welded position (``boundary._weld``), so that
-        the copies of a position (a seam) move together, as one point."""
+        the copies of a position (a seam) move together, as one point. like: the leaves of another view of a
+        batch, whose mesh leaves (verts, its shift, colors) these share: only R, t and focal are new."""
+        if like is not None:
+            return dict(like, **{k: self.params[k].clone().requires_grad_(k in names) for k in ("R", "t", "focal")})
         p = {k: v.clone().requires_grad_(k in names) for k, v in self.params.items() if k != "verts"}
         verts = self.params["verts"]
         if "verts" in names:
@@ -262,7 +300,8 @@ def fd_gradient(prob: _Problem, names, step=1e-4, scheme="central", vertices=Non
     if isinstance(step, bool) or not isinstance(step, (int, float)) or not (0 < step < math.inf):
         raise ValueError(f"step must be a positive finite number, got {step!r}")
     if vertices is not None:                                                # a list of vertex indices
-        listed = vertices.reshape(-1).tolist() if torch.is_tensor(vertices) else np.asarray(vertices).reshape(-1).tolist()
+        flat = vertices.reshape(-1) if torch.is_tensor(vertices) else np.asarray(vertices).reshape(-1)
+        listed = flat.tolist()
         vertices = [_count(i, "vertices (each entry, a vertex index)", None, minimum=0) for i in listed]
     out = []
     with torch.no_grad():
@@ -333,6 +372,11 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     face colours (``model="flat"``); weights: (H, W, 3); background: (3,). method: one of ``METHODS`` (module
     docstring). wrt: None for d L / d mesh.verts, (V, 3); or a sequence of ``PARAMETERS`` names ("verts", "R",
     "t", "focal" (K[0, 0], with K[1, 1] scaled along), "colors"), and a tuple comes back in that order.
+    A camera batch: camera a list of N cameras of one image size and weights (N, H, W, 3), for the gradient
+    of ``Σ_views Σ weights ⊙ image`` by "reynolds" or "edge_sampling" (``boundary_gradient``: the per-mesh
+    work done once, one autograd pass; ``samples`` points per view, drawn view after view from one
+    generator); "verts" and "colors" come back summed over the views, "R" (N, 3, 3), "t" (N, 3) and "focal"
+    (N,) one per view. The other methods take one camera at a time.
     Copies of one position (a seam) get the same entry, the derivative of moving them all (module docstring).
     options: ``dtype`` (every method; default promote(verts, camera)); finite_differences: ``step`` (1e-4),
     ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
@@ -356,7 +400,13 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     dtype = options.pop("dtype", None)
     if dtype is not None and not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
         raise ValueError(f"dtype must be a floating torch.dtype such as torch.float32 or torch.float64, got {dtype!r}")
-    prob = _Problem(mesh, camera, colors, weights, background, model, dtype)
+    if isinstance(camera, (list, tuple)):
+        if method not in ("reynolds", "edge_sampling"):
+            raise ValueError(f"a camera batch takes method 'reynolds' or 'edge_sampling', got {method!r}: call "
+                             "image_gradient once per camera and add the gradients")
+        prob = _Problem.batch(mesh, camera, colors, weights, background, model, dtype)
+    else:
+        prob = _Problem(mesh, camera, colors, weights, background, model, dtype)
     if method == "exact":
         grads = exact_gradient(prob, names)
     elif method == "finite_differences":
@@ -379,7 +429,8 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
                               kernel=kernel, warp=warp, generator=_generator(options))
         by_name = dict(zip(geo, g))
         if "colors" in names:                                               # linear: the exact derivative
-            by_name["colors"] = exact_gradient(prob, ("colors",))[0]        # (the interior term, exactly)
+            by_name["colors"] = sum(exact_gradient(q, ("colors",))[0]      # (the interior term, exactly)
+                                    for q in (prob if isinstance(prob, list) else [prob]))
         grads = tuple(by_name[n] for n in names)
     elif method == "nmr":
         reach = options.pop("reach", None)

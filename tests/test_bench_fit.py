@@ -106,3 +106,16 @@ def test_table_and_options():
         fb._applications("mesh,teapots")
     with pytest.raises(ValueError, match="unknown application"):
         fb.bench_fit(["teapots"])
+
+
+def test_fast_batch_rows():
+    """A camera batch against its views one by one, side by side: per renderer a time row (ms, one by one ->
+    batched) and a speed-up row; the numbers are the machine's, only their form is checked."""
+    rows = fb.bench_fit(["batch"], fast=True, out=lambda line: None)
+    check_rows(rows)
+    labels = ("soft silhouettes + gradient", "soft colours + gradient", "exact image + colour gradient",
+              "Reynolds gradient")
+    assert [r["method"] for r in rows] == [f"{label}, 4 views at 16²" for label in labels for _ in range(2)]
+    for timed, ratio in zip(rows[::2], rows[1::2]):
+        assert (timed["unit"], ratio["unit"], timed["steps"], ratio["start"]) == ("ms", "x", 4, 1.0)
+        assert timed["target"] == timed["start"] and ratio["final"] == pytest.approx(timed["start"] / timed["final"])

@@ -1,5 +1,5 @@
 """The inverse-rendering benchmark (lecture 10): ``python -m course bench fit
-[--only mesh,images,camera,texture,views] [--fast] [--figure PNG]``.
+[--only mesh,images,camera,texture,views,batch] [--fast] [--figure PNG]``.
 
 Each application of lecture 10 is fitted once, with its entry point's defaults and seed 0, and reported as
 steps, wall time and the final metric on held-out views next to its start value and the issue's target:
@@ -33,6 +33,15 @@ steps, wall time and the final metric on held-out views next to its start value 
   Metric: the held-out PSNR, target >= 30 dB.
 * **views**: ``course.fit_views.fit_with_learned_views(teapot)``, the views fixed on the ring
   (``learn_views=False``) and learned (``True``). Metric: the held-out IoU, target >= 0.90.
+* **batch**: what a fit's step renders, the views one by one against one call for all of them (a camera batch),
+  side by side in the same run (``timing.time_side_by_side``, the median of ``BATCH_REPEAT`` runs after a warm-up),
+  on the teapot from ``sphere_views(N, offset=1.9)`` as the fits see it, for 12 views at 64² (the mesh from
+  images) and 8 views at 32²: soft silhouettes with their gradient (σ = 3e-4, ``fit_silhouettes``' start),
+  soft colours with their gradient (σ = 3e-5, γ = 1e-2, ``fit_mesh_from_images``), the exact image with
+  the colours' gradient (``exact_coverage``, as ``fit._reynolds_backward`` draws it) and the Reynolds gradient
+  of the vertices (``image_gradient``). Two rows per case: the time in ms, one by one → batched (met when the
+  batch is no slower), and the speed-up (one by one / batched); "steps" is the number of views, "time (s)"
+  the whole measurement. ``--fast``: 4 views at 16² of ``teapot(3)``, one timed run.
 
 The teapot is ``models.teapot(dtype=torch.float64)`` (``teapot(4)`` in ``camera_problem``). A fit is slow
 (seconds to minutes), so each runs once (``REPEAT = 1``; ``--repeat`` is accepted and ignored), timed with
@@ -53,9 +62,10 @@ from ..mesh import Mesh
 __all__ = ["APPLICATIONS", "bench_fit", "save_fit_picture", "format_table", "add_arguments", "run"]
 
 REPEAT = 1               # a fit takes seconds to a minute: each runs once
-DESCRIPTION = "lecture 10's fits (mesh, images, camera, texture, views): steps, time, final metric on held-out views"
+DESCRIPTION = ("lecture 10's fits (mesh, images, camera, texture, views): steps, time, final metric on held-out "
+               "views; a camera batch against its views one by one (batch)")
 
-APPLICATIONS = ("mesh", "images", "camera", "texture", "views")
+APPLICATIONS = ("mesh", "images", "camera", "texture", "views", "batch")
 
 # the issue's targets: (better, target)
 IOU_TARGET = ("higher", 0.90)
@@ -75,6 +85,8 @@ IMAGE_FITS = (("soft, large steps", {}),
               ("soft, large steps, from a sphere", dict(start="sphere", lr=0.02, steps=300)),
               ("soft, large steps, 20 steps", dict(steps=20)),
               ("reynolds, large steps, 20 steps", dict(gradient="reynolds", steps=20)))
+BATCH_SIZES = ((12, 64), (8, 32))          # (views, pixels a side): the mesh from images', and smaller
+BATCH_REPEAT = 3                           # timed runs of each side (the median), after one warm-up
 
 
 # ------------------------------------------------------------------------------------------- helpers
@@ -86,10 +98,15 @@ def _timed(fn, *args, **kwargs):
 
 
 def _row(application, method, result, seconds, metric, unit, start, final, target):
+    """A fit's row: its steps are those its history recorded (``_steps_row``)."""
+    return _steps_row(application, method, len(result.history.loss), seconds, metric, unit, start, final, target)
+
+
+def _steps_row(application, method, steps, seconds, metric, unit, start, final, target):
     better, goal = target
     final = None if final is None else float(final)
     met = final is not None and (final >= goal if better == "higher" else final <= goal)
-    return dict(application=application, method=method, steps=len(result.history.loss), seconds=seconds,
+    return dict(application=application, method=method, steps=steps, seconds=seconds,
                 metric=metric, unit=unit, start=None if start is None else float(start), final=final,
                 target=goal, better=better, met=bool(met))
 
@@ -223,8 +240,60 @@ def _views_rows(fast, out, figure=None):
     return rows
 
 
+def _batch_cases(mesh):
+    """(label, draw) for each renderer a fit's step calls: ``draw(cameras, weights)`` runs it and the gradient
+    of ``Σ weights ⊙ image`` (the vertices', or the colours' for the exact image) on one camera, weights
+    (H, W, 3), or on a list of N, weights (N, H, W, 3), in one call (a camera batch)."""
+    from ..coverage import exact_coverage
+    from ..soft import soft_rasterize
+    from ..visibility import image_gradient
+    colors = fit.shaded_face_colors(mesh)
+
+    def silhouettes(cameras, weights):
+        verts = mesh.verts.clone().requires_grad_()
+        image = soft_rasterize(Mesh(verts, mesh.faces), cameras, mode="silhouette", sigma=3e-4,
+                               cull_backfaces=False)
+        torch.autograd.grad((weights[..., 0] * image).sum(), verts)
+
+    def colours(cameras, weights):
+        verts = mesh.verts.clone().requires_grad_()
+        image = soft_rasterize(Mesh(verts, mesh.faces), cameras, mode="color", sigma=3e-5, gamma=1e-2,
+                               face_colors=colors, background=fit.SKY)
+        torch.autograd.grad((weights * image).sum(), verts)
+
+    def exact(cameras, weights):
+        leaf = colors.clone().requires_grad_()
+        torch.autograd.grad((weights * exact_coverage(mesh, cameras, leaf, fit.SKY)).sum(), leaf)
+
+    def reynolds(cameras, weights):
+        image_gradient(mesh, cameras, colors, weights, method="reynolds", background=fit.SKY)
+    return (("soft silhouettes + gradient", silhouettes), ("soft colours + gradient", colours),
+            ("exact image + colour gradient", exact), ("Reynolds gradient", reynolds))
+
+
+def _batch_rows(fast, out, figure=None):
+    """Each renderer of a fit's step, the views one by one against one batched call (module docstring)."""
+    from .timing import time_side_by_side
+    mesh = models.teapot(3 if fast else 8, dtype=torch.float64)
+    rows = []
+    for n, size in ((4, 16),) if fast else BATCH_SIZES:
+        cameras = fit.sphere_views(n, offset=1.9, size=size, dtype=torch.float64)
+        weights = torch.randn(n, size, size, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+        for label, draw in _batch_cases(mesh):
+            start = time.perf_counter()
+            one, batched = time_side_by_side([lambda: [draw(c, w) for c, w in zip(cameras, weights)],
+                                              lambda: draw(cameras, weights)],
+                                             repeat=1 if fast else BATCH_REPEAT)
+            seconds = time.perf_counter() - start
+            method = f"{label}, {n} views at {size}²"
+            rows.append(_steps_row("batch", method, n, seconds, "time, one by one -> batched", "ms", one, batched,
+                                   ("lower", one)))
+            rows.append(_steps_row("batch", method, n, seconds, "speed-up", "x", 1.0, one / batched, ("higher", 1.0)))
+    return rows
+
+
 RUNNERS = {"mesh": _mesh_rows, "images": _images_rows, "camera": _camera_rows,
-           "texture": _texture_rows, "views": _views_rows}
+           "texture": _texture_rows, "views": _views_rows, "batch": _batch_rows}
 
 
 def bench_fit(only=APPLICATIONS, fast: bool = False, out=print, figure=None) -> list[dict]:
