@@ -19,10 +19,14 @@
 * ``gradients`` (``course.bench.gradients``): visibility gradients (finite differences, edge sampling,
   Reynolds, reparameterization, soft, NMR; optionally Mitsuba's projective sampling) against the exact
   gradient: time against error, a table and a Pareto plot.
-* ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, camera, texture, views): steps, time, final metric.
+* ``fit`` (``course.bench.fit``): lecture 10's fits (mesh, images, camera, texture, views) and camera batches:
+  steps, time, final metric.
 * ``style`` (``course.bench.style``): lecture 11's style transfer (soft, texture only, hard) and DeepDream at
   full size: time, style loss on held-out views, how far the outline moved.
 * ``kernels`` (``course.bench.kernels``): the compiled kernels' cold start, compile and cache-load times.
+* ``shadow-gradients`` (``course.bench.shadow_gradients``): the gradient of a shadowed image (exact, finite
+  differences, Reynolds, edge sampling) against differentiable variance shadow maps: time against error, a
+  table and a Pareto plot.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -39,7 +43,8 @@ import os
 
 import torch
 
-from . import aa, fit, gradients, kernels, precision, raster, raytrace, shadows, skips, soft, style
+from . import (aa, fit, gradients, kernels, precision, raster, raytrace, shadow_gradients, shadows, skips, soft,
+               style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -49,7 +54,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 # name -> module with DESCRIPTION, add_arguments(parser) and run(args) -> rows; a new benchmark adds one line
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
-           "kernels": kernels, "style": style}
+           "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients}
 
 
 def cli(argv) -> int:
