@@ -995,7 +995,7 @@ def fit_camera(mesh, reference_image, camera_start, *, steps: int = 200, method:
         fit = fit_camera(scene, render(scene).image, start)
 
     Three choices make the default fit robust to starts far from the answer (measured on the teapot
-    from 12 views, starts 30-45° away about random axes, flat and textured references: at 96² every fit
+    from 12 poses, starts 30-45° away about random axes, flat and textured references: at 96² every fit
     within 2° and 2 % of the distance; at 64² all but the views whose bias, below, exceeds 2 %):
 
     * **several starts** (``starts``): the start and the start orbited about ``target`` by ±``spread``
