@@ -66,8 +66,8 @@ from .mesh import Mesh
 from .tensors import as_tensor
 from .visibility import image_gradient
 
-__all__ = ["SCENES", "shadow_scene", "SplitMesh", "split_by_shadows", "shadowed_coverage", "shadow_image_gradient",
-           "shadow_raytrace", "SHADOW_METHODS", "GRAZING"]
+__all__ = ["SCENES", "shadow_scene", "SplitMesh", "project_onto_plane", "split_by_shadows", "shadowed_coverage",
+           "shadow_image_gradient", "shadow_raytrace", "SHADOW_METHODS", "GRAZING"]
 
 SHADOW_METHODS = ("exact", "finite_differences", "reynolds", "edge_sampling")
 GRAZING = 1e-9           # n̂_f · l at or below this: the face is turned away from the light (fully shadowed)
@@ -254,6 +254,34 @@ def _shadow_polygon(g_poly, v0, n_hat, light: _Light, cos, tol):
     if abs(orient) <= tol * tol:
         return None                                                         # edge-on to the light
     return D if orient > 0 else D.flip(0)
+
+
+def project_onto_plane(points, plane_point, plane_normal, light) -> torch.Tensor:
+    """Where the shadows of ``points`` (N, 3) fall on a plane, under a directional light: (N, 3).
+
+    The plane passes through ``plane_point`` (3,) with normal ``plane_normal`` (3,), any length; ``light`` (3,)
+    is the way the light travels. A point at height ``h = n̂ · (x - p)`` above the plane slides along the light
+    until its height is 0: ``x' = x - h / (n̂ · l) · l`` (the split's formula, for one point at a time; the
+    sign of l cancels). Differentiable in all four; a light parallel to the plane (n̂ · l = 0) casts no
+    shadow on it and is refused."""
+    x = as_tensor(points, name="points")
+    if x.dim() != 2 or x.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {tuple(x.shape)}")
+    p, n, l = (as_tensor(v, dtype=x.dtype, device=x.device, name=name)
+               for v, name in ((plane_point, "plane_point"), (plane_normal, "plane_normal"), (light, "light")))
+    for v, name in ((p, "plane_point"), (n, "plane_normal"), (l, "light")):
+        if v.shape != (3,):
+            raise ValueError(f"{name} must have shape (3,), got {tuple(v.shape)}")
+    if not all(bool(torch.isfinite(v).all()) for v in (x, p, n, l)):
+        raise ValueError("points, plane_point, plane_normal and light must be finite (no NaN or inf)")
+    if float(n.detach().norm()) == 0 or float(l.detach().norm()) == 0:
+        raise ValueError("plane_normal and light must be non-zero vectors")
+    n_hat = n / n.norm()
+    cos = n_hat @ l
+    if abs(float(cos.detach())) <= GRAZING * float(l.detach().norm()):
+        raise ValueError("the light is parallel to the plane (n · l = 0): it casts no shadow on it")
+    h = (x - p) @ n_hat                                                     # (N,) heights above the plane
+    return x - (h / cos)[:, None] * l
 
 
 def _subtract(piece, D, n_hat, tol):
