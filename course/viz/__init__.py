@@ -10,7 +10,7 @@ The figures are split by topic: ``core`` (images, grids, 3D points and meshes, t
 """
 from __future__ import annotations
 
-from . import antialias, cameras, core, gradients, raster, raytrace, shading
+from . import antialias, cameras, core, explorers, gradients, raster, raytrace, shading
 from .core import *  # noqa: F401,F403
 from .core import DEPTH_CMAP, __all__ as _core_all
 from .cameras import *  # noqa: F401,F403
@@ -19,9 +19,10 @@ from .shading import *  # noqa: F401,F403
 from .antialias import *  # noqa: F401,F403
 from .gradients import *  # noqa: F401,F403
 from .raytrace import *  # noqa: F401,F403
+from .explorers import *  # noqa: F401,F403
 
 __all__ = (list(_core_all) + cameras.__all__ + raster.__all__ + shading.__all__ + antialias.__all__ + raytrace.__all__
-           + gradients.__all__)
+           + gradients.__all__ + explorers.__all__)
 
 from ..viz_fit import fit_figure, history_frames, mesh_renderer, plot_history, save_fit_gif, save_gif, show_gif
 __all__ += ["plot_history", "history_frames", "mesh_renderer", "save_gif", "save_fit_gif", "fit_figure", "show_gif"]

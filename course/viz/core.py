@@ -172,27 +172,65 @@ def plot_triangles_2d(tris, ax=None, colors=None, labels: bool = False):
     return ax
 
 
-def explorer(draw, *, figure_scale: float = 1.5, **sliders) -> None:
-    """An ipywidgets explorer: ``draw(**values)`` redraws a figure whenever a slider moves.
+def _control(widgets, name, spec, continuous):
+    """The widget of one explorer parameter (see ``explorer``), with the bounded width every control shares."""
+    common = dict(description=name, style={"description_width": "90px"},
+                  layout=widgets.Layout(width="100%", min_width="360px", max_width="560px"))
+    if isinstance(spec, bool):
+        return widgets.Checkbox(value=spec, indent=False, **common)
+    if isinstance(spec, list):
+        return widgets.Dropdown(options=spec, value=spec[0], **common)
+    lo, hi, step, default = spec
+    integer = all(isinstance(v, int) and not isinstance(v, bool) for v in spec)
+    kind = widgets.IntSlider if integer else widgets.FloatSlider
+    return kind(value=default, min=lo, max=hi, step=step, continuous_update=continuous, **common)
 
-    ``sliders`` maps a parameter name to ``(min, max, step, default)``. Costly redraws should pass
-    ``continuous_update=False`` through ``draw.continuous_update = False`` or keep images small.
 
-    The sliders are stacked, one per row, each as wide as the notebook allows between 360 and 560 px (a 90-px
+def _check_control(name, spec):
+    if isinstance(spec, bool):
+        return spec
+    if isinstance(spec, list):
+        if not spec:
+            raise ValueError(f"control {name!r}: a list of options must not be empty")
+        return spec[0]
+    if not isinstance(spec, tuple) or len(spec) != 4:
+        raise ValueError(f"slider {name!r}: expected (min, max, step, default), got {spec!r}")
+    lo, hi, _, default = spec
+    if not lo <= default <= hi:
+        raise ValueError(f"slider {name!r}: default {default} lies outside [{lo}, {hi}]")
+    return default
+
+
+def _png(fig) -> str:
+    import base64
+    import io
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", bbox_inches="tight")
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def explorer(draw, *, figure_scale: float = 1.5, still: bool = False, **sliders) -> None:
+    """An ipywidgets explorer: ``draw(**values)`` redraws a figure whenever a control moves.
+
+    ``sliders`` maps a parameter name to its control: ``(min, max, step, default)`` a slider (an integer
+    slider when all four are ints), ``True`` / ``False`` a checkbox, a list of options a drop-down whose
+    first option is the default. Costly redraws should set ``draw.continuous_update = False``: the picture is
+    then redrawn when a slider is released, and the controls are greyed out (disabled) while it is drawn, so
+    the explorer shows that it is working and no backlog of redraws can pile up. (While a slider is dragged,
+    the front end sends a new value only once the kernel is idle again, skipping the values in between, so a
+    live redraw that is slower than the drag lags but never queues.)
+
+    The controls are stacked, one per row, each as wide as the notebook allows between 360 and 560 px (a 90-px
     name, the track, the readout), so a track stays 200-370 px long in any window (JupyterLab at 1024 px with
     the file browser open gives 560); the picture sits below them. The figures ``draw`` makes are drawn at
-    ``figure_scale`` times matplotlib's resolution, so a 4-inch figure is about 600 px wide. A notebook opened without widget state (saved outputs, an untrusted notebook)
-    shows a one-line note instead of the widget's repr. Without ipywidgets it draws once with the defaults,
-    so the notebook still reads well. Displays the widget itself and returns None (so a cell ending in
-    ``explorer(...)`` does not show it twice).
+    ``figure_scale`` times matplotlib's resolution, so a 4-inch figure is about 600 px wide. A notebook opened
+    without widget state (saved outputs, an untrusted notebook) shows a one-line note instead of the widget's
+    repr; with ``still=True`` the first picture (the defaults) travels with it as a PNG, which a viewer
+    without widgets (nbval, nbconvert, a web page) shows instead. Without ipywidgets it draws once with the
+    defaults, so the notebook still reads well. Displays the widget itself and returns None (so a cell ending
+    in ``explorer(...)`` does not show it twice).
     """
-    for name, spec in sliders.items():
-        if len(spec) != 4:
-            raise ValueError(f"slider {name!r}: expected (min, max, step, default), got {spec!r}")
-        lo, hi, _, default = spec
-        if not lo <= default <= hi:
-            raise ValueError(f"slider {name!r}: default {default} lies outside [{lo}, {hi}]")
-    defaults = {name: spec[3] for name, spec in sliders.items()}
+    defaults = {name: _check_control(name, spec) for name, spec in sliders.items()}
     try:
         import ipywidgets as widgets
         from IPython.display import display
@@ -200,21 +238,28 @@ def explorer(draw, *, figure_scale: float = 1.5, **sliders) -> None:
         draw(**defaults)
         return
     continuous = getattr(draw, "continuous_update", True)
-    controls = {name: widgets.FloatSlider(value=d, min=lo, max=hi, step=st, description=name,
-                                          continuous_update=continuous, style={"description_width": "90px"},
-                                          layout=widgets.Layout(width="100%", min_width="360px", max_width="560px"))
-                for name, (lo, hi, st, d) in sliders.items()}
+    controls = {name: _control(widgets, name, spec, continuous) for name, spec in sliders.items()}
+    first = {}
 
     def redraw(**values):
-        with plt.rc_context({"figure.dpi": plt.rcParams["figure.dpi"] * figure_scale}):
-            draw(**values)
-            plt.show()
+        busy = [c for c in controls.values() if not continuous and not c.disabled]
+        for c in busy:                                                      # greyed out: drawing
+            c.disabled = True
+        try:
+            with plt.rc_context({"figure.dpi": plt.rcParams["figure.dpi"] * figure_scale}):
+                draw(**values)
+                if still and not first and plt.get_fignums():
+                    first["png"] = _png(plt.gcf())
+                plt.show()
+        finally:
+            for c in busy:
+                c.disabled = False
 
     picture = widgets.interactive_output(redraw, controls)
     box = widgets.VBox([widgets.VBox(list(controls.values())), picture])
     bundle = box._repr_mimebundle_()
     bundle["text/plain"] = (f"[interactive explorer: sliders {', '.join(sliders)}; run the cell in JupyterLab "
                             f"to use them]")
+    if "png" in first:
+        bundle["image/png"] = first["png"]
     display(bundle, raw=True)
-
-

@@ -1,0 +1,158 @@
+"""The lecture explorers (course.viz.explorers): every draw function runs headless at its defaults and with each
+control at its ends, returns the line its notebook cell prints, the same line every time; bad values are named;
+the explorer itself shows integer sliders, checkboxes and drop-downs, a still picture for viewers without
+widgets, and greys its controls out while a slow picture is drawn. The bench runs through ``run(args)``."""
+import argparse
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import ipywidgets as widgets  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+
+from course import viz  # noqa: E402
+from course.bench import explorers as bench  # noqa: E402
+from course.viz import explorers as E  # noqa: E402
+
+# a drop-down option that computes a whole fit or synthesis is not re-run here (its default is)
+COSTLY_OPTIONS = {"10 loss landscape", "11 style weight"}
+
+
+@pytest.fixture
+def shown(monkeypatch):
+    calls = []
+    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: calls.append((obj, kw)))
+    yield calls
+    plt.close("all")
+
+
+def widget_tree(bundle):
+    from ipywidgets.widgets import widget
+    return widget._instances[bundle["application/vnd.jupyter.widget-view+json"]["model_id"]]
+
+
+@pytest.mark.parametrize("name", list(E.EXPLORERS))
+def test_each_draw_runs_at_its_defaults_and_its_ends_and_repeats_its_line(name):
+    _, draw, controls, _ = E.EXPLORERS[name]
+    first = draw()
+    assert isinstance(first["line"], str) and first["line"]
+    plt.close("all")
+    assert draw()["line"] == first["line"]                                  # deterministic
+    plt.close("all")
+    moves = [m for m in bench.slider_moves(controls)
+             if name not in COSTLY_OPTIONS or not isinstance(controls[next(iter(m))], list)]
+    for values in moves:
+        out = draw(**values)
+        assert out["line"] and len(plt.get_fignums()) == 1, values          # one figure per redraw
+        plt.close("all")
+
+
+def test_the_defaults_of_the_explorers_match_their_draw_functions():
+    import inspect
+    for name, (_, draw, controls, _) in E.EXPLORERS.items():
+        params = inspect.signature(draw).parameters
+        assert list(params) == list(controls), name
+        for key, spec in controls.items():
+            default = spec if isinstance(spec, bool) else spec[0] if isinstance(spec, list) else spec[3]
+            assert params[key].default == default, (name, key)
+
+
+def test_fill_rule_line_and_the_top_left_rule():
+    out = E.draw_fill_rule()
+    assert out["line"] == "vertex (5.5, 5.5): A or B at 19 centres, both at 0; C in front at 2 of 4 shared centres"
+    for x in (2.5, 3.5, 4.5, 5.5, 6.5):                                     # the shared edge through centres
+        assert E.draw_fill_rule(x=x, y=x)["both"] == 0
+    plt.close("all")
+
+
+def test_edge_in_a_pixel_boundary_term_is_the_derivative():
+    for offset, angle in [(0.5, 20.0), (0.2, -40.0), (0.9, 0.0), (1.5, 10.0)]:
+        out = E.draw_edge(offset, angle)
+        assert out["boundary"] == pytest.approx(out["autograd"], abs=1e-12)
+    assert E.draw_edge()["line"] == "offset 0.5, tilt 20 deg: coverage 0.5, boundary term 1.0, autograd 1.0"
+    plt.close("all")
+
+
+def test_bvh_depth_and_finite_difference_agree_with_their_sources():
+    world = E._rt_world()
+    assert int(world[3].max()) == E.BVH_DEPTH
+    assert E._fd_estimate(-5.0, E.F64) == pytest.approx(E._fd_exact(), rel=1e-8)
+
+
+@pytest.mark.parametrize("draw, values, words", [
+    (E.draw_fill_rule, dict(x=-1.0), "x must be a number in [0.0, 8]"),
+    (E.draw_supersampling, dict(shape="cube"), "shape must be one of ['sliver', 'teapot']"),
+    (E.draw_supersampling, dict(jitter=1), "jitter must be True or False"),
+    (E.draw_shadow_map, dict(pcf=2), "pcf must be one of [1, 3, 5, 7, 9]"),
+    (E.draw_bvh, dict(level=99), "level must be a number in [0, 14]"),
+    (E.draw_soft, dict(log_sigma="big"), "log_sigma must be a number"),
+    (E.draw_loss_landscape, dict(sigma=0.5), "sigma must be one of"),
+    (E.draw_style_weight, dict(weight=0.5), "weight must be one of"),
+    (E.draw_shadow_light, dict(elevation=0.0), "elevation must be a number in [15.0, 89.0]"),
+])
+def test_bad_values_are_named(draw, values, words):
+    with pytest.raises(ValueError) as err:
+        draw(**values)
+    assert words in str(err.value)
+
+
+@pytest.mark.parametrize("name", ["03 fill rule", "09 edge in a pixel", "10 fit snapshots"])
+def test_an_explorer_cell_prints_its_line_and_carries_a_still_picture(name, shown, capsys):
+    explore, draw, controls, live = E.EXPLORERS[name]
+    explore()
+    (bundle, options), = shown
+    assert options == {"raw": True} and bundle["image/png"]                 # for viewers without widgets
+    out = capsys.readouterr().out                   # (outside a kernel the Output widget's clearing shows as \x1b[2K)
+    assert out.replace("\x1b[2K\r", "") == draw()["line"] + "\n"
+    column = widget_tree(bundle).children[0]
+    assert [c.description for c in column.children] == list(controls)
+    assert all(c.continuous_update is live for c in column.children if hasattr(c, "continuous_update"))
+
+
+def test_explorer_makes_int_sliders_checkboxes_and_dropdowns(shown):
+    seen = []
+    viz.explorer(lambda **v: seen.append(v), n=(1, 8, 1, 2), jitter=False, shape=["sliver", "teapot"],
+                 scale=(0.0, 1.0, 0.1, 0.5))
+    (bundle, _), = shown
+    n, jitter, shape, scale = widget_tree(bundle).children[0].children
+    assert isinstance(n, widgets.IntSlider) and (n.min, n.max, n.value) == (1, 8, 2)
+    assert isinstance(jitter, widgets.Checkbox) and jitter.value is False
+    assert isinstance(shape, widgets.Dropdown) and shape.value == "sliver" and list(shape.options) == ["sliver",
+                                                                                                     "teapot"]
+    assert isinstance(scale, widgets.FloatSlider)
+    assert seen == [dict(n=2, jitter=False, shape="sliver", scale=0.5)]
+    assert "image/png" not in bundle                                        # a still only when asked for
+
+
+def test_a_slow_explorer_greys_its_controls_out_while_it_draws(shown):
+    states, controls = [], []
+
+    def draw(a=0.5, b=True):
+        states.append([c.disabled for c in controls])
+        plt.figure()
+
+    draw.continuous_update = False
+    viz.explorer(draw, a=(0.0, 1.0, 0.1, 0.5), b=True)
+    (bundle, _), = shown
+    controls += widget_tree(bundle).children[0].children
+    controls[0].value = 0.7                                                 # a release: one redraw
+    assert states[-1] == [True, True]
+    assert [c.disabled for c in controls] == [False, False]                 # and back afterwards
+
+
+def test_an_empty_dropdown_is_named(shown):
+    with pytest.raises(ValueError, match="control 'shape': a list of options must not be empty"):
+        viz.explorer(lambda **kw: None, shape=[])
+
+
+def test_bench_runs_and_reports_rows(capsys):
+    rows = bench.run(argparse.Namespace(repeat=1, only=["03", "09 edge in"]))
+    assert [r["explorer"] for r in rows] == ["03 fill rule", "09 edge in a pixel"]
+    assert all(r["first"] > 0 and r["median"] > 0 and r["moves"] == 2 * 2 + 2 * (r["explorer"] == "03 fill rule")
+               for r in rows)
+    out = capsys.readouterr().out
+    assert "03 fill rule" in out and "median ms" in out
+    assert bench.slider_moves(dict(k=(1, 8, 1, 2), jitter=False, shape=["a", "b", "c"])) == [
+        {"k": 1}, {"k": 8}, {"jitter": True}, {"shape": "b"}, {"shape": "c"}]
