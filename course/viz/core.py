@@ -239,7 +239,6 @@ def explorer(draw, *, figure_scale: float = 1.5, still: bool = False, **sliders)
         return
     continuous = getattr(draw, "continuous_update", True)
     controls = {name: _control(widgets, name, spec, continuous) for name, spec in sliders.items()}
-    first = {}
 
     def redraw(**values):
         busy = [c for c in controls.values() if not continuous and not c.disabled]
@@ -248,18 +247,42 @@ def explorer(draw, *, figure_scale: float = 1.5, still: bool = False, **sliders)
         try:
             with plt.rc_context({"figure.dpi": plt.rcParams["figure.dpi"] * figure_scale}):
                 draw(**values)
-                if still and not first and plt.get_fignums():
-                    first["png"] = _png(plt.gcf())
                 plt.show()
         finally:
             for c in busy:
                 c.disabled = False
 
-    picture = widgets.interactive_output(redraw, controls)
+    png = None
+    if still:
+        # The defaults' picture is drawn here, kept as a PNG and closed: it goes into the widget's own state
+        # and into the cell's bundle, never as a display of its own, so a kernel without a widget front end
+        # (nbval, nbconvert) sees the same outputs on every run. Later redraws go to the widget only.
+        before = set(plt.get_fignums())
+        with plt.rc_context({"figure.dpi": plt.rcParams["figure.dpi"] * figure_scale}):
+            draw(**defaults)
+            new = [n for n in plt.get_fignums() if n not in before]
+            if new:
+                png = _png(plt.figure(new[-1]))
+            for n in new:
+                plt.close(n)
+        picture = widgets.Output()
+
+        def on_change(_=None):
+            with picture:
+                picture.clear_output(wait=True)
+                redraw(**{name: c.value for name, c in controls.items()})
+        for c in controls.values():
+            c.observe(on_change, names="value")
+        if png is not None:
+            import base64
+            from IPython.display import Image
+            picture.append_display_data(Image(data=base64.b64decode(png), format="png"))
+    else:
+        picture = widgets.interactive_output(redraw, controls)
     box = widgets.VBox([widgets.VBox(list(controls.values())), picture])
     bundle = box._repr_mimebundle_()
     bundle["text/plain"] = (f"[interactive explorer: sliders {', '.join(sliders)}; run the cell in JupyterLab "
                             f"to use them]")
-    if "png" in first:
-        bundle["image/png"] = first["png"]
+    if png is not None:
+        bundle["image/png"] = png
     display(bundle, raw=True)
