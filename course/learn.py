@@ -6,36 +6,61 @@ supervises it. The predicted mesh is rendered by soft rasterization (``soft.soft
 one call: a camera batch) from two or more known views, and compared with the shape's silhouettes there by
 Kato et al.'s IoU loss, plus their smoothness loss so the sphere deforms without folding::
 
-    image (H, W, 3) ─encoder─▶ code (128,) ─heads─▶ verts = (sphere + offsets) · scale + translation (V, 3)
+    image (H, W, 3) ─encoder─▶ code (64,) ─heads─▶ verts = (sphere + offsets) · scale + translation (V, 3)
     verts ─soft_rasterize(views)─▶ (Nv, H, W) ─silhouette_iou_loss(·, targets)─▶ + λ smoothness_loss
 
 The views and the data come from ``course.shape_data`` (image of view 0 in, silhouettes of all views out).
 The soft silhouette needs a blur of about a pixel to pass gradients from pixels the mesh misses: σ = 3e-3 in
-the NDC units of ``soft_rasterize`` is σ_px = σ W² / 4 ≈ 0.8 px² at W = 32.
+the NDC units of ``soft_rasterize`` is σ_px = σ W² / 4 ≈ 0.8 px² at W = 32; ``train_reconstructor`` then
+sharpens it tenfold over training, because a blurred outline is wider than the mesh's and a network fitted to
+it learns meshes too small (at 32 px about a pixel all round: a third of the volume of a capsule).
+
+* ``train_reconstructor(train, ...)``: seeded Adam, a cosine learning rate, a random pair of the dataset's
+  views per shape and step as targets, σ shrinking geometrically; a tqdm bar with ``progress=True``.
+* ``evaluate_reconstruction(model, train, test)``: per family, the voxel IoU at 32³ (``shape_data.voxelize``)
+  and the Chamfer distance (``shape_metrics``) of the network's mesh and of two baselines, *retrieval* (the
+  training shape with the nearest view-0 image, as it is) and the untrained *sphere*. Retrieval is strong
+  here: the families vary in a handful of parameters, so among a few hundred training shapes the nearest
+  image is often a near-twin. The network has to match that by generalising, not by looking up; on the
+  held-out torus neither can open the hole (``python -m course bench learn`` prints the table).
+* ``save_reconstructor`` / ``load_reconstructor`` and ``load_pretrained_reconstructor()``: the network the
+  bench's defaults train, shipped as ``course/data/reconstructor.pt`` (float32, about 0.5 MB; never
+  downloaded).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import torch
 
-from .losses import silhouette_iou_loss, smoothness_loss
+from .losses import interior_edges, silhouette_iou_loss
 from .mesh import Mesh
 from .models import icosphere
+from .shape_data import voxel_iou, voxelize
+from .shape_metrics import chamfer_distance
 from .soft import soft_rasterize
 from .tensors import _check_count, _check_real
 
-__all__ = ["ReconstructionSettings", "MeshReconstructor", "reconstruction_loss", "train_step"]
+__all__ = ["ReconstructionSettings", "MeshReconstructor", "reconstruction_loss", "batched_smoothness", "train_step",
+           "train_reconstructor", "retrieve", "shape_scores", "evaluate_reconstruction", "save_reconstructor",
+           "load_reconstructor", "load_pretrained_reconstructor", "PRETRAINED"]
+
+PRETRAINED = Path(__file__).parent / "data" / "reconstructor.pt"
 
 
 @dataclass(frozen=True)
 class ReconstructionSettings:
     """The network and loss settings. size: input image side (a multiple of 8); subdivisions: of the icosphere
-    template (2: 162 vertices, 320 faces); radius: the template's; sigma: soft rasterization's sharpness (NDC);
-    smoothness: the weight λ of the smoothness loss; seed: of the initial weights."""
+    template (2: 162 vertices, 320 faces); radius: the template's; code: the length of the code between encoder
+    and heads (64 keeps the whole network near 120,000 numbers, under 0.5 MB in float32); sigma: soft
+    rasterization's sharpness (NDC); smoothness: the weight λ of the smoothness loss; seed: of the initial
+    weights."""
     size: int = 32
     subdivisions: int = 2
     radius: float = 0.6
+    code: int = 64
     sigma: float = 3e-3
     smoothness: float = 1e-3
     seed: int = 0
@@ -45,9 +70,9 @@ class MeshReconstructor(torch.nn.Module):
     """An encoder from one image to the vertices of a deformed icosphere. Faces are the template's (``faces``).
 
     Three stride-2 3 × 3 convolutions (16, 32, 64 channels, ReLU) take the (B, H, W, 3) images to (B, 64, H/8,
-    W/8), a linear layer to a 128-d code, then three linear heads: offsets (V × 3), log-scale (3) and
-    translation (3). The heads start at zero (offsets nearly so), so every prediction starts as the template
-    sphere: the loss's first gradients then come from the silhouettes, not from a random mesh.
+    W/8), a linear layer to a code (``settings.code`` long, ReLU), then three linear heads: offsets (V × 3),
+    log-scale (3) and translation (3). The heads start at zero (offsets nearly so), so every prediction starts
+    as the template sphere: the loss's first gradients then come from the silhouettes, not from a random mesh.
     """
 
     def __init__(self, settings: ReconstructionSettings = ReconstructionSettings()):
@@ -60,17 +85,17 @@ class MeshReconstructor(torch.nn.Module):
                              _check_real(settings.radius, "radius", low=0, low_open=True), dtype=torch.float32)
         self.register_buffer("template", template.verts)              # (V, 3)
         self.register_buffer("faces", template.faces)                 # (F, 3)
-        V = template.num_verts
+        V, code = template.num_verts, _check_count(settings.code, "code")
         with torch.random.fork_rng(devices=[]):                        # seeded weights, global state restored
             torch.manual_seed(_check_count(settings.seed, "seed", minimum=0))
             self.encoder = torch.nn.Sequential(
                 torch.nn.Conv2d(3, 16, 3, stride=2, padding=1), torch.nn.ReLU(),   # (B, 16, H/2, W/2)
                 torch.nn.Conv2d(16, 32, 3, stride=2, padding=1), torch.nn.ReLU(),  # (B, 32, H/4, W/4)
                 torch.nn.Conv2d(32, 64, 3, stride=2, padding=1), torch.nn.ReLU(),  # (B, 64, H/8, W/8)
-                torch.nn.Flatten(), torch.nn.Linear(64 * (size // 8) ** 2, 128), torch.nn.ReLU())
-            self.offsets = torch.nn.Linear(128, V * 3)
-            self.log_scale = torch.nn.Linear(128, 3)
-            self.translation = torch.nn.Linear(128, 3)
+                torch.nn.Flatten(), torch.nn.Linear(64 * (size // 8) ** 2, code), torch.nn.ReLU())  # (B, code)
+            self.offsets = torch.nn.Linear(code, V * 3)
+            self.log_scale = torch.nn.Linear(code, 3)
+            self.translation = torch.nn.Linear(code, 3)
         with torch.no_grad():
             self.offsets.weight.mul_(1e-2), self.offsets.bias.zero_()
             for head in (self.log_scale, self.translation):
@@ -82,7 +107,7 @@ class MeshReconstructor(torch.nn.Module):
             raise ValueError(f"images must be (B, {self.settings.size}, {self.settings.size}, 3), got shape "
                              f"{tuple(images.shape)}")
         B = images.shape[0]
-        code = self.encoder(images.permute(0, 3, 1, 2))               # (B, 128) from (B, 3, H, W)
+        code = self.encoder(images.permute(0, 3, 1, 2))               # (B, code) from (B, 3, H, W)
         offsets = self.offsets(code).view(B, -1, 3)                   # (B, V, 3)
         scale = torch.exp(self.log_scale(code))[:, None]              # (B, 1, 3) per axis, positive
         return (self.template + offsets) * scale + self.translation(code)[:, None]
@@ -93,31 +118,214 @@ def reconstruction_loss(verts: torch.Tensor, faces: torch.Tensor, cameras, targe
     """(loss, per-shape IoU loss (B,)): the mean over the B shapes of the silhouette IoU loss averaged over the
     Nv views plus ``smoothness`` × ``smoothness_loss``.
 
-    verts: (B, V, 3) predicted vertices; faces: (F, 3); cameras: list of Nv Camera (one image size H × W);
-    targets: (B, Nv, H, W) silhouettes in [0, 1]. Each shape's views are one ``soft_rasterize`` call (back
-    faces kept: a deforming sphere may fold, and its silhouette should still count every face).
+    verts: (B, V, 3) predicted vertices; faces: (F, 3); cameras: list of Nv Camera (one image size H × W), the
+    same views for every shape, or a list of B such lists, shape b's own views (``train_reconstructor`` draws
+    a random pair per shape); targets: (B, Nv, H, W) silhouettes in [0, 1]. Each shape's views are one
+    ``soft_rasterize`` call (back faces kept: a deforming sphere may fold, and its silhouette should still
+    count every face).
     """
-    if verts.ndim != 3 or targets.ndim != 4 or targets.shape[:2] != (verts.shape[0], len(cameras)):
-        raise ValueError(f"need verts (B, V, 3) and targets (B, Nv={len(cameras)}, H, W), got "
+    per_shape = _per_shape_cameras(cameras, verts.shape[0] if verts.ndim == 3 else -1)
+    Nv = len(per_shape[0]) if per_shape else len(cameras)
+    if verts.ndim != 3 or targets.ndim != 4 or targets.shape[:2] != (verts.shape[0], Nv):
+        raise ValueError(f"need verts (B, V, 3) and targets (B, Nv={Nv}, H, W), got "
                          f"{tuple(verts.shape)} and {tuple(targets.shape)}")
-    iou_losses, smooth = [], []
+    iou_losses = []
     for b in range(verts.shape[0]):
         mesh = Mesh(verts[b], faces)
-        sils = soft_rasterize(mesh, list(cameras), mode="silhouette", sigma=sigma, cull_backfaces=False)  # (Nv,H,W)
+        sils = soft_rasterize(mesh, per_shape[b], mode="silhouette", sigma=sigma, cull_backfaces=False)  # (Nv,H,W)
         iou_losses.append(silhouette_iou_loss(sils, targets[b].to(sils.dtype), reduction="mean"))
-        smooth.append(smoothness_loss(verts[b], faces))
     iou_losses = torch.stack(iou_losses)                              # (B,)
-    return iou_losses.mean() + smoothness * torch.stack(smooth).mean(), iou_losses.detach()
+    return iou_losses.mean() + smoothness * batched_smoothness(verts, faces).mean(), iou_losses.detach()
+
+
+def batched_smoothness(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """(B,) ``losses.smoothness_loss`` of each of B meshes sharing ``faces`` (F, 3), verts (B, V, 3): the edges
+    between faces found once for the batch (``interior_edges``, a sort of all 3F sides) instead of once a shape."""
+    _, pairs = interior_edges(faces)                                   # (E, 2) the two faces of each edge
+    tri = verts[:, faces]                                              # (B, F, 3, 3)
+    cross = torch.linalg.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)  # (B, F, 3)
+    length = cross.norm(dim=-1, keepdim=True)
+    normals = cross / torch.where(length > 0, length, torch.ones_like(length))  # unit, or 0 for a degenerate face
+    cos_normals = (normals[:, pairs[:, 0]] * normals[:, pairs[:, 1]]).sum(-1)   # (B, E) n₁·n₂
+    return ((1 - cos_normals) ** 2).sum(-1)
+
+
+def _per_shape_cameras(cameras, B: int) -> list:
+    """B lists of cameras from one shared list or B lists (checked: each list non-empty, all one length)."""
+    cameras = list(cameras)
+    if cameras and all(isinstance(c, (list, tuple)) for c in cameras):
+        if len(cameras) != B or len({len(c) for c in cameras}) != 1 or not cameras[0]:
+            raise ValueError(f"per-shape cameras must be B={B} lists of one length, got {len(cameras)} lists")
+        return [list(c) for c in cameras]
+    return [cameras] * max(B, 0) if cameras else []
 
 
 def train_step(model: MeshReconstructor, optimizer: torch.optim.Optimizer, images: torch.Tensor,
-               silhouettes: torch.Tensor, cameras) -> float:
-    """One optimisation step on a batch: images (B, H, W, 3) in, silhouettes (B, Nv, H, W) of ``cameras`` as
-    targets. Returns the loss before the step."""
+               silhouettes: torch.Tensor, cameras, sigma: float | None = None) -> float:
+    """One optimisation step on a batch: images (B, H, W, 3) in, silhouettes (B, Nv, H, W) of ``cameras`` (one
+    list for all, or B lists: ``reconstruction_loss``) as targets; sigma: soft rasterization's (default the
+    model's settings.sigma). Returns the loss before the step."""
     optimizer.zero_grad()
     verts = model(images)
-    loss, _ = reconstruction_loss(verts, model.faces, cameras, silhouettes, sigma=model.settings.sigma,
+    sigma = model.settings.sigma if sigma is None else sigma
+    loss, _ = reconstruction_loss(verts, model.faces, cameras, silhouettes, sigma=sigma,
                                   smoothness=model.settings.smoothness)
     loss.backward()
     optimizer.step()
     return float(loss.detach())
+
+
+# ---- training ----------------------------------------------------------------------------------------------
+
+def train_reconstructor(train, *, settings: ReconstructionSettings = ReconstructionSettings(), steps: int = 1500,
+                        batch: int = 16, views: int = 2, lr: float = 2e-3, final_sigma: float | None = None,
+                        seed: int = 0, model=None, progress: bool = False) -> tuple[MeshReconstructor, list]:
+    """(model, losses per step): Adam on ``reconstruction_loss`` over the ShapeSet ``train``; input view 0.
+
+    Each step draws ``batch`` shapes (an epoch's shuffled order, then the next) and for each shape ``views``
+    distinct views of the dataset's Nv at random, its own pair: a network that sees 8 views of every shape two
+    at a time learns more of each shape's depth than one that always sees the same two, at the cost of two.
+    The learning rate follows a cosine from ``lr`` down to lr / 20 over the steps (large steps while the
+    sphere finds the families' outlines, small ones for the details). The blur σ of the soft silhouettes
+    shrinks geometrically from ``settings.sigma`` to ``final_sigma`` (default a tenth of it): a blurred
+    silhouette spreads past the mesh's outline (every face near the edge, front and back, adds a little
+    probability outside it), so a network trained only at a pixel's blur learns meshes about a pixel too
+    small, while a sharp silhouette from the start passes gradients from too few pixels. Seeded by ``seed``
+    (the order and the views; the weights by ``settings.seed``) through a private generator: torch's global
+    state is untouched.
+    model: continue training this one (its own settings then apply). progress: a tqdm bar with the loss.
+    """
+    steps, batch = _check_count(steps, "steps", minimum=0), _check_count(batch, "batch")
+    lr = _check_real(lr, "lr", low=0, low_open=True)
+    N, Nv = train.silhouettes.shape[:2]
+    views = _check_count(views, "views")
+    if views > Nv:
+        raise ValueError(f"views must be at most the dataset's {Nv} views, got {views}")
+    if train.images.shape[2:4] != (settings.size, settings.size) and model is None:
+        raise ValueError(f"the dataset's images are {tuple(train.images.shape[2:4])}, the network reads "
+                         f"{settings.size} x {settings.size}")
+    model = model if model is not None else MeshReconstructor(settings)
+    sigma0 = model.settings.sigma
+    final_sigma = sigma0 / 10 if final_sigma is None else _check_real(final_sigma, "final_sigma", low=0,
+                                                                       low_open=True)
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(steps, 1), eta_min=lr / 20)
+    g = torch.Generator().manual_seed(_check_count(seed, "seed", minimum=0))
+    order, losses = torch.empty(0, dtype=torch.long), []
+    from tqdm.auto import tqdm
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
+    bar = tqdm(range(steps), desc="train reconstructor", disable=disable, leave=False)
+    for step in bar:
+        sigma = sigma0 * (final_sigma / sigma0) ** (step / max(steps - 1, 1))  # geometric, σ0 → final
+        while order.numel() < batch:                                   # the next shapes of shuffled epochs
+            order = torch.cat([order, torch.randperm(N, generator=g)])
+        idx, order = order[:batch], order[batch:]
+        pick = torch.rand(batch, Nv, generator=g).argsort(1)[:, :views]  # (B, views) distinct views per shape
+        cameras = [[train.cameras[int(v)] for v in row] for row in pick]
+        targets = train.silhouettes[idx[:, None], pick]                # (B, views, H, W)
+        losses.append(train_step(model, optimizer, train.images[idx, 0], targets, cameras, sigma))
+        schedule.step()
+        bar.set_postfix(loss=f"{losses[-1]:.3f}", refresh=False)
+    return model.eval(), losses
+
+
+# ---- evaluation --------------------------------------------------------------------------------------------
+
+def retrieve(train, images: torch.Tensor) -> torch.Tensor:
+    """(B,) int64 the index of the training shape whose view-0 image is nearest (sum of squared differences)
+    to each of images (B, H, W, 3): the retrieval baseline, a lookup with no 3D reasoning at all."""
+    if images.ndim != 4 or images.shape[1:] != train.images.shape[2:]:
+        raise ValueError(f"images must be (B, {', '.join(map(str, train.images.shape[2:]))}) like the training "
+                         f"set's views, got shape {tuple(images.shape)}")
+    flat = train.images[:, 0].reshape(len(train), -1).double()        # (N, H W 3)
+    query = images.reshape(images.shape[0], -1).double()              # (B, H W 3)
+    return torch.cdist(query, flat).argmin(1)
+
+
+def shape_scores(pred, target, *, resolution: int = 32, samples: int = 2000, target_voxels=None) -> dict:
+    """``{"iou", "chamfer"}`` of one predicted Mesh against its target Mesh: the IoU of their ``voxelize``
+    occupancy at ``resolution``³ over [-1, 1]³ and ``shape_metrics.chamfer_distance`` with ``samples`` points a
+    side (a fraction of the target's bounding-box diagonal). target_voxels: the target's grid, if at hand."""
+    target_voxels = voxelize(target, resolution) if target_voxels is None else target_voxels
+    pred = Mesh(pred.verts.detach().double(), pred.faces)
+    return dict(iou=voxel_iou(voxelize(pred, resolution), target_voxels),
+                chamfer=chamfer_distance(pred, target, samples=samples))
+
+
+def evaluate_reconstruction(model: MeshReconstructor, train, test, *, resolution: int = 32, samples: int = 2000,
+                            split: str = "test", progress: bool = False) -> list:
+    """Rows, one per family of ``test`` and a last one ("mean", over all its shapes): the mean voxel IoU
+    (``resolution``³) and Chamfer distance (``samples`` points a side) of three predictions from view 0:
+
+    * ``network``: the model's mesh;
+    * ``retrieval``: the training shape whose view-0 image is nearest (``retrieve``), as it is;
+    * ``sphere``: the untrained network's output, the template sphere, the same for every shape.
+
+    Row keys: split, family, n, iou_network, iou_retrieval, iou_sphere, chamfer_network, chamfer_retrieval,
+    chamfer_sphere. Pass the held-out families as ``test`` (and another ``split`` name) for the generalisation
+    row: retrieval can only answer with a training family there.
+    """
+    from tqdm.auto import tqdm
+    with torch.no_grad():
+        verts = model(test.images[:, 0].to(model.template.dtype))     # (N, V, 3)
+    nearest = retrieve(train, test.images[:, 0])
+    sphere = Mesh(model.template, model.faces)
+    sphere_voxels, retrieved_voxels = voxelize(sphere, resolution), {}
+    scores = {"network": [], "retrieval": [], "sphere": []}
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
+    for n in tqdm(range(len(test)), desc=f"evaluate {split}", disable=disable, leave=False):
+        target = test.meshes[n]
+        voxels = voxelize(target, resolution)
+        common = dict(resolution=resolution, samples=samples, target_voxels=voxels)
+        scores["network"].append(shape_scores(Mesh(verts[n], model.faces), target, **common))
+        k = int(nearest[n])
+        if k not in retrieved_voxels:
+            retrieved_voxels[k] = voxelize(train.meshes[k], resolution)
+        for method, mesh, grid in (("retrieval", train.meshes[k], retrieved_voxels[k]),
+                                   ("sphere", sphere, sphere_voxels)):
+            scores[method].append(dict(iou=voxel_iou(grid, voxels),
+                                       chamfer=chamfer_distance(mesh, target, samples=samples)))
+    rows = []
+    groups = [(f, (test.labels == k).nonzero()[:, 0].tolist()) for k, f in enumerate(test.families)]
+    for family, members in groups + [("mean", list(range(len(test))))]:
+        row = dict(split=split, family=family, n=len(members))
+        for metric in ("iou", "chamfer"):
+            for method, values in scores.items():
+                row[f"{metric}_{method}"] = sum(values[i][metric] for i in members) / max(len(members), 1)
+        rows.append(row)
+    return rows
+
+
+# ---- checkpoints -------------------------------------------------------------------------------------------
+
+def save_reconstructor(model: MeshReconstructor, path, note: str = "") -> None:
+    """Write ``{"settings", "state_dict" (float32), "note"}`` to ``path`` (``torch.save``); ``note`` says how the
+    weights were made. The template and faces are buffers: they travel with the weights."""
+    state = {k: v.detach().to(torch.float32) if v.is_floating_point() else v for k, v in model.state_dict().items()}
+    torch.save({"settings": asdict(model.settings), "state_dict": state, "note": str(note)}, path)
+
+
+def load_reconstructor(path) -> MeshReconstructor:
+    """The network saved by ``save_reconstructor`` at ``path``, in eval mode (``note`` attribute: how it was
+    made). Loads tensors and plain values only (``weights_only``); raises ValueError for another file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"no checkpoint at {path}")
+    data = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(data, dict) or not {"settings", "state_dict"} <= set(data):
+        raise ValueError(f"{path} is not a reconstructor checkpoint (save_reconstructor writes one)")
+    model = MeshReconstructor(ReconstructionSettings(**data["settings"]))
+    model.load_state_dict(data["state_dict"])
+    model.note = data.get("note", "")
+    return model.eval()
+
+
+def load_pretrained_reconstructor() -> MeshReconstructor:
+    """The network shipped with the course (``course/data/reconstructor.pt``), never downloaded: made by
+    ``python -m course bench learn --save course/data/reconstructor.pt`` at the bench's defaults (seed 0,
+    float32 weights), so anyone can remake it; ``model.note`` repeats its recipe and its scores.
+    Use it to look at reconstructions without the minutes of training."""
+    if not PRETRAINED.is_file():
+        raise ValueError(f"the shipped checkpoint {PRETRAINED} is missing; remake it with "
+                         "python -m course bench learn --save course/data/reconstructor.pt")
+    return load_reconstructor(PRETRAINED)

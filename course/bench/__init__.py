@@ -30,6 +30,8 @@
 * ``shadow-art`` (``course.bench.shadow_art``): an occluder fitted to a target shadow (a star, a T, an L) with
   the exact, Reynolds and variance-shadow-map gradients: time, start and final shadow IoU.
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
+* ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
+  retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -46,8 +48,8 @@ import os
 
 import torch
 
-from . import (aa, explorers, fit, gradients, kernels, precision, raster, raytrace, shadow_art, shadow_gradients,
-               shadows, skips, soft, style)
+from . import (aa, explorers, fit, gradients, kernels, learn, precision, raster, raytrace, shadow_art,
+               shadow_gradients, shadows, skips, soft, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -58,7 +60,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
-           "explorers": explorers}
+           "explorers": explorers, "learn": learn}
 
 
 def cli(argv) -> int:
