@@ -43,6 +43,13 @@ from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
 from .fit import fit_camera, fit_mesh_from_silhouettes
 from .fit_texture import fit_texture_from_images, fit_vertex_colors_from_images
 from .fit_views import fit_with_learned_views
+from .shadow_gradients import shadow_image_gradient, shadowed_coverage, split_by_shadows
+from .shadow_fit import fit_light_direction
+from .shadow_art import fit_shadow_art
+from .shapes import make_shape
+from .shape_data import make_dataset, voxel_iou, voxelize
+from .learn import MeshReconstructor, load_pretrained_reconstructor, train_reconstructor
+from .mvtn import MultiViewClassifier
 
 __version__ = "0.1.0"
 
@@ -64,6 +71,11 @@ __all__ = [
     # inverse rendering
     "silhouette_iou_loss", "smoothness_loss", "iou", "psnr", "fit_mesh_from_silhouettes", "fit_camera",
     "fit_texture_from_images", "fit_vertex_colors_from_images", "fit_with_learned_views",
+    # differentiable shadows
+    "shadowed_coverage", "shadow_image_gradient", "split_by_shadows", "fit_light_direction", "fit_shadow_art",
+    # learning through the renderer
+    "make_shape", "make_dataset", "voxelize", "voxel_iou", "MeshReconstructor", "train_reconstructor",
+    "load_pretrained_reconstructor", "MultiViewClassifier",
     # shading and rendering
     "AmbientLight", "DirectionalLight", "PointLight", "Material", "lambert", "phong", "blinn_phong",
     "sample_texture", "linear_to_srgb", "srgb_to_linear", "Scene", "RenderSettings", "RenderResult",
