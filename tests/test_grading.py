@@ -53,9 +53,11 @@ NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": 
          "8.1": "nmr_edge_gradients", "8.2": "soft_coverage", "8.3": "soft_blend", "8.4": "sigma_for_blur",
          "9.1": "best_step", "9.2": "boundary_term", "9.3": "triangle_term", "9.4": "edge_sample",
          "10.1": "silhouette_iou_loss", "10.2": "smoothness_loss", "10.3": "fit_pose", "10.4": "staircase",
-         "11.1": "gram_matrix", "11.2": "style_loss", "11.3": "random_directions", "11.4": "deep_dream_step"}
+         "11.1": "gram_matrix", "11.2": "style_loss", "11.3": "random_directions", "11.4": "deep_dream_step",
+         "12.1": "project_onto_plane", "12.2": "shadow_velocity", "12.3": "variance_lit", "12.4": "light_step",
+         "13.1": "voxel_iou", "13.2": "multiview_iou_loss", "13.3": "view_eyes", "13.4": "train_step"}
 WITHOUT_REFERENCE = {"7.5", "7.6"}       # no package function does their work: they forbid the ones that help
-LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-11: tests/test_grading_NN.py
+LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-13: tests/test_grading_NN.py
 
 
 def rodrigues_dividing_by_theta(w):
@@ -285,7 +287,7 @@ MISTAKES = [  # task, implementation, points it earns, words its message must co
 def test_the_registry_holds_the_fixed_tasks():
     assert {t.id: t.name for t in TASKS.values()} == NAMES
     assert all(1 <= t.points <= 6 for t in TASKS.values())               # points by difficulty
-    for lecture in range(5, 12):                                            # 05-11: at least four tasks each
+    for lecture in range(5, 14):                                            # 05-13: at least four tasks each
         assert len(tasks_for_lecture(lecture)) >= 4, lecture
     assert [t.id for t in tasks_for_lecture(1)] == ["1.1", "1.2", "1.3", "1.4"]
     assert {t.id for t in TASKS.values() if not t.reference} == WITHOUT_REFERENCE   # the others name what they
