@@ -12,8 +12,9 @@ from course.fit import (_area, _candidate_starts, _pyramid, camera_problem, fit_
 from course.mesh import Mesh
 from course.raster import interpolate, rasterize
 from course.render import RenderSettings, Scene, default_lights, render
-from course.soft import _screen_faces, soft_rasterize
+from course.soft import soft_rasterize
 from course.textures import sample_texture
+from screen_helpers import far_from_edges
 
 SHARP = dict(sigma=1e-8, gamma=1e-4, threshold=1e-8)        # σ = γ² → 0: the soft image tends to the hard one
 
@@ -22,23 +23,6 @@ def teapot_scene(size=32, lights=True):
     mesh = models.teapot(2, dtype=torch.float64)
     cam = Camera.look_at((1.5, 1.0, 2.5), fov_y=40, width=size, height=size, dtype=torch.float64)
     return Scene(mesh, cam, lights=default_lights() if lights else ())
-
-
-def far_from_edges(mesh, camera, px=1.0):
-    """(H, W) bool: pixel centres farther than ``px`` pixels from every projected edge of a front face."""
-    with torch.no_grad():
-        xy, _, _, _ = _screen_faces(mesh.verts.double(), mesh.faces, camera, True)
-    H, W = camera.height, camera.width
-    yy, xx = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
-                            indexing="ij")
-    p = torch.stack([xx.reshape(-1), yy.reshape(-1)], 1)                    # (P, 2)
-    best = torch.full((p.shape[0],), float("inf"), dtype=torch.float64)
-    for k in range(3):
-        s, e = xy[:, k], xy[:, (k + 1) % 3]                                  # (T, 2)
-        d = e - s
-        t = (((p[:, None] - s[None]) * d[None]).sum(-1) / (d * d).sum(-1).clamp_min(1e-30)).clamp(0, 1)
-        best = torch.minimum(best, (p[:, None] - (s[None] + t[..., None] * d[None])).norm(dim=-1).min(1).values)
-    return (best > px).view(H, W)
 
 
 # ------------------------------------------------------------------------------ soft rasterization: textures

@@ -8,7 +8,7 @@ from course.models import icosphere
 from course.raster import rasterize
 from course.render import RenderSettings, Scene, render
 from course.shading import AmbientLight, DirectionalLight, Material
-from course.soft import _screen_faces
+from screen_helpers import far_from_edges
 
 
 def sphere_scene(size=32, requires_grad=False, colors=False):
@@ -22,25 +22,6 @@ def sphere_scene(size=32, requires_grad=False, colors=False):
                          dtype=torch.float64)
     lights = (AmbientLight(intensity=0.3), DirectionalLight(direction=(0.3, -0.5, -1.0), intensity=0.8))
     return Scene([mesh], cam, lights=lights, materials=Material(specular=0.2), background=(0.1, 0.2, 0.3))
-
-
-def far_from_edges(mesh, camera, px=1.0):
-    """(H, W) bool: pixel centres farther than ``px`` pixels from every projected edge of a visible face."""
-    with torch.no_grad():
-        xy, _, _, _ = _screen_faces(mesh.verts.double(), mesh.faces, camera, True)
-    H, W = camera.height, camera.width
-    yy, xx = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
-                            indexing="ij")
-    p = torch.stack([xx.reshape(-1), yy.reshape(-1)], 1)                    # (P, 2)
-    a = xy                                                                   # (T, 3, 2)
-    best = torch.full((p.shape[0],), float("inf"), dtype=torch.float64)
-    for k in range(3):
-        s, e = a[:, k], a[:, (k + 1) % 3]                                    # (T, 2)
-        d = e - s
-        t = (((p[:, None] - s[None]) * d[None]).sum(-1) / (d * d).sum(-1).clamp_min(1e-30)).clamp(0, 1)
-        dist = (p[:, None] - (s[None] + t[..., None] * d[None])).norm(dim=-1)   # (P, T)
-        best = torch.minimum(best, dist.min(1).values)
-    return (best > px).view(H, W)
 
 
 @pytest.mark.parametrize("shading", ["gouraud", "flat", "unlit"])
