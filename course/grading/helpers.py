@@ -204,6 +204,15 @@ _LIBRARY_DIRS = tuple({os.path.realpath(p) for key, p in sysconfig.get_paths().i
                       | {os.path.dirname(os.path.dirname(os.path.realpath(__file__)))})   # course/
 
 
+def _match(got, variants, tol: float = 1e-6) -> str | None:
+    """The explanation of the first ``(alternative, explanation)`` in ``variants`` whose alternative has
+    ``got``'s shape and is close to it (a typical mistake recognised by the wrong result it gives), else None."""
+    for alternative, explanation in variants:
+        if alternative is not None and got.shape == alternative.shape and _close(got, alternative, tol):
+            return explanation
+    return None
+
+
 def _is_library(filename: str) -> bool:
     return os.path.realpath(filename).startswith(_LIBRARY_DIRS) or filename.startswith("<frozen")
 

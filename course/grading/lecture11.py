@@ -23,7 +23,7 @@ import math
 
 import torch
 
-from .helpers import _call, _close, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__ = ["gram_matrix_reference", "style_loss_reference", "random_directions_reference",
@@ -104,13 +104,6 @@ def _dream(x, objective, step_size, sign=1.0, norm="mean"):
     else:
         scale = torch.ones((), dtype=g.dtype)
     return (x.detach() + sign * step_size * g / scale).detach()
-
-
-def _match(got, variants, tol=1e-6):
-    for alternative, explanation in variants:
-        if alternative is not None and got.shape == alternative.shape and _close(got, alternative, tol):
-            return explanation
-    return None
 
 
 # ------------------------------------------------------------------------------------ 11.1 gram_matrix

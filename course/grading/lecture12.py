@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import torch
 
-from .helpers import _call, _close, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__ = ["project_onto_plane_reference", "shadow_velocity_reference", "variance_lit_reference",
@@ -112,13 +112,6 @@ def _step(l, g, lr, kind="full"):
     if kind == "no_normalize":
         return out
     return out / out.norm()
-
-
-def _match(got, variants, tol=1e-6):
-    for alternative, explanation in variants:
-        if alternative is not None and got.shape == alternative.shape and _close(got, alternative, tol):
-            return explanation
-    return None
 
 
 def _unit(v):

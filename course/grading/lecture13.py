@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import torch
 
-from .helpers import _call, _close, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__ = ["voxel_iou_reference", "multiview_iou_loss_reference", "view_eyes_reference", "train_step_reference"]
@@ -108,13 +108,6 @@ def _train(model, optimizer, inputs, targets, loss_fn, kind="full"):
         with torch.no_grad():
             return float(loss_fn(model(inputs), targets))
     return float(loss.detach())
-
-
-def _match(got, variants, tol=1e-6):
-    for alternative, explanation in variants:
-        if alternative is not None and got.shape == alternative.shape and _close(got, alternative, tol):
-            return explanation
-    return None
 
 
 # ------------------------------------------------------------------------------------ 13.1 voxel_iou
