@@ -34,3 +34,14 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "browser" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def shown(monkeypatch):
+    """What ``viz.explorer`` displays (tests/test_explorer.py, tests/test_explorers.py): a list of
+    (object, kwargs) passed to IPython's display; the figures are closed afterwards."""
+    import matplotlib.pyplot as plt
+    calls = []
+    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: calls.append((obj, kw)))
+    yield calls
+    plt.close("all")

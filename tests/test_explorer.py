@@ -14,15 +14,6 @@ SLIDERS = dict(azimuth=(-180.0, 180.0, 5.0, 30.0), elevation=(-80.0, 80.0, 5.0, 
                distance=(1.5, 10.0, 0.1, 4.0), focal=(40.0, 400.0, 5.0, 120.0))
 
 
-@pytest.fixture
-def shown(monkeypatch):
-    """What explorer displays: a list of (object, kwargs) passed to IPython's display."""
-    calls = []
-    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: calls.append((obj, kw)))
-    yield calls
-    plt.close("all")
-
-
 def make(shown, draw=None, **kw):
     calls = []
 

@@ -20,14 +20,6 @@ from course.viz import explorers as E  # noqa: E402
 COSTLY_OPTIONS = {"10 loss landscape", "11 style weight"}
 
 
-@pytest.fixture
-def shown(monkeypatch):
-    calls = []
-    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: calls.append((obj, kw)))
-    yield calls
-    plt.close("all")
-
-
 def widget_tree(bundle):
     from ipywidgets.widgets import widget
     return widget._instances[bundle["application/vnd.jupyter.widget-view+json"]["model_id"]]
