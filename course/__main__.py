@@ -8,7 +8,7 @@ import sys
 COMMANDS = {
     "render": ("course.render_cli", "render a mesh (or the bundled default scene) to a PNG"),
     "bench": ("course.bench", "time against error, side by side"),
-    "grade": ("course.grading.grader", "grade exercise notebooks in fresh kernels"),
+    "grade": ("course.grading.grader", "grade exercise notebooks: their code in a worker, the checks in the grader"),
     "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),
     "workspace": ("course.grading.workspace", "copy an exercise into work/, your own folder (never overwritten)"),
     "gradescope": ("course.grading.gradescope", "build the Gradescope autograder (a zip) of one exercise"),

@@ -1,7 +1,7 @@
 """A term's class from one grading run: the roster, due dates and late penalties, the Canvas and Moodle imports,
 feedback files and copy flags (course/grading/roster.py, late.py, gradebook.py, feedback.py; ``grade`` options).
 
-Most tests build their records by hand, so no kernel starts. One fixture grades a class of four lecture-01
+Most tests build their records by hand, so no worker starts. One fixture grades a class of four lecture-01
 notebooks made from the released exercise (tests/class_fixtures.py): ana and ben answer tasks 1.1 and 1.2
 honestly and differently, cat pastes the package's look_at and copies ana's rodrigues with names changed (both
 pass: scores unchanged, flags raised), eve hands in the exercise untouched and is not on the roster, and dan is on

@@ -109,7 +109,7 @@ def test_two_notebooks_of_one_student_and_lecture_are_refused_naming_both(tmp_pa
         assign_students([first, second], mode="folder")
     assert str(first) in str(error.value) and str(second) in str(error.value)
     for options in (["--students", "folder"], ["--gradebook", str(tmp_path / "book.csv")]):
-        assert cli([str(first), str(second)] + options) == 2                     # refused before any kernel
+        assert cli([str(first), str(second)] + options) == 2                     # refused before any worker
         err = capsys.readouterr().err
         assert str(first) in err and str(second) in err and "grade one of them" in err
     assert not (tmp_path / "book.csv").exists()
@@ -194,7 +194,7 @@ def test_the_summary_gives_each_tasks_mean_and_distribution(graded):
 
 
 def test_jobs_must_be_positive_and_the_progress_bar_obeys_tqdm_disable(tmp_path, capsys):
-    notes = tmp_path / "notes.ipynb"                     # no NN_ prefix: no tasks, never run in a kernel
+    notes = tmp_path / "notes.ipynb"                     # no NN_ prefix: no tasks, never run
     notes.write_text("{}", encoding="utf-8")
     assert cli([str(notes), "--jobs", "0"]) == 2 and "--jobs" in capsys.readouterr().err
     shown = {}

@@ -5,7 +5,7 @@ the zip's root and executable scripts. setup.sh needs root and the network, so i
 from the zip's own files. run_autograder is run for real on lecture 01, in temporary roots (AUTOGRADER_ROOT) with
 this environment's python (AUTOGRADER_PYTHON), for each kind of submission: the solution, a wrong one among
 several notebooks, the unmodified exercise, a hostile notebook (writes results.json, calls the reference, edits
-the autograder's files), one that kills its kernel, files that are not notebooks, several notebooks none named
+the autograder's files), one that ends its process, files that are not notebooks, several notebooks none named
 like the exercise, nothing, and a broken notebook file. Each results.json is checked against the fields
 Gradescope documents.
 """
@@ -22,7 +22,8 @@ import pytest
 from nbformat.v4 import new_code_cell
 
 from course.grading import tasks_for_lecture
-from course.grading.gradescope import build_wheel, cli, fingerprint, grader_files, pick_notebook
+from course.grading.grader import course_files, fingerprint
+from course.grading.gradescope import build_wheel, cli, pick_notebook
 
 ROOT = Path(__file__).resolve().parent.parent
 NAME = "01_representations_and_transforms.ipynb"
@@ -140,10 +141,9 @@ def test_which_notebook_is_graded(tmp_path):
     assert path == folder / NAME and message.endswith(f"{NAME} was graded, the others not.")
 
 
-def test_the_files_a_score_depends_on_are_fingerprinted(tmp_path):
-    files = grader_files(1)
-    names = {p.name for p in files}
-    assert {"grader.py", "registry.py", "lecture01.py", "camera.py", "mesh.py"} <= names and "raster.py" not in names
+def test_the_course_files_are_fingerprinted(tmp_path):
+    names = {p.name for p in course_files()}
+    assert {"grader.py", "registry.py", "lecture01.py", "camera.py", "mesh.py", "__init__.py"} <= names
     copy = [tmp_path / "lecture01.py", tmp_path / "gone.py"]
     copy[0].write_text("x = 1\n")
     before = fingerprint(copy)
@@ -234,10 +234,14 @@ def test_a_hostile_notebook_gains_nothing(autograder):
 
 
 @pytest.mark.timeout(600)
-def test_a_notebook_that_kills_its_kernel_scores_zero_with_the_reason(autograder):
+def test_a_notebook_that_ends_its_process_is_graded_without_that_cell(autograder):
     data, _ = autograder("exits", {NAME: notebook_bytes(SOLUTION, ["import os\nos._exit(0)"])})
-    assert data["score"] == 0
-    assert all(t["output"].startswith("the kernel died while running the notebook") for t in data["tests"])
+    assert data["score"] == 10                        # the cell that ended the worker is skipped on its restart
+    broken = notebook_bytes(SOLUTION, ["import os\nos._exit(0)"])
+    nb = nbformat.reads(broken.decode(), as_version=4)
+    nb.cells.insert(2, new_code_cell("import os\nos.kill(os.getpid(), 9)"))   # before rodrigues' check cell
+    data, _ = autograder("killed", {NAME: nbformat.writes(nb).encode()})
+    assert data["score"] == 10
 
 
 @pytest.mark.parametrize("kind, files, words", [

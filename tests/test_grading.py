@@ -1,6 +1,6 @@
 """Grading: every task's check (the reference scores full marks, typical mistakes lose points with a message a
 student can act on), the helpers and check-cell API, and the command-line grader on five tiny notebooks run in
-real kernels (correct, released exercise, wrong, broken, cheating)."""
+real workers (correct, released exercise, wrong, broken, cheating)."""
 import csv
 import json
 import logging
@@ -674,7 +674,7 @@ def test_patching_the_check_modules_in_a_notebook_gains_nothing(tmp_path, monkey
         nb.cells += [new_code_cell(source), new_code_cell(f'check("{task_id}", {TASKS[task_id].name})')]
     path = tmp_path / "01_patched.ipynb"
     nbformat.write(nb, str(path))
-    results = grade_notebook(path, timeout=120)                # the grader imports the checks afresh
+    results = grade_notebook(path, timeout=120)                # the checks run in the grader, not the notebook
     assert {r.task: r.points for r in results} == honest
 
 

@@ -14,7 +14,12 @@ The package, one module per job; each imports only the modules above it in this 
     submissions.py who handed in a notebook (Submission, student_of) and its lecture
     roster.py      the class list: names, ids, emails, sections, extensions (``grade --roster``)
     late.py        due dates and the linear late penalty (``grade --due --late-days``)
-    grader.py      ``python -m course grade``: whole notebooks scored in fresh kernels (and how far to trust it)
+    remote.py      calls across a process boundary in plain data, autograd included: how the grader calls a
+                   student's function that runs in another process
+    sandbox.py     that process: a worker of its own, limited, as a user of its own where it can be, ended whole
+    worker.py      what runs in it: the notebook's cells in an IPython shell, and the grader's requests
+    reading.py     the notebook's code read, never run: the reference rule, lines worth a TA's reading
+    grader.py      ``python -m course grade``: whole notebooks scored by the grader (and how far to trust it)
     gradebook.py   a grading run's exports: Canvas and Moodle imports, the roster's and lateness columns
     feedback.py    one Markdown file per notebook to return to its student (``grade --feedback``)
     flags.py       copy flags for the TA: code like the package's or a classmate's (``grade --flags``)

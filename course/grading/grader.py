@@ -1,8 +1,8 @@
-"""The command-line grader: every notebook run in a fresh kernel, every task scored by the grader itself.
+"""The command-line grader: every notebook run in a worker process of its own, every task scored by the grader.
 
 ``python -m course grade NOTEBOOK... [--jobs N] [--json FILE] [--csv FILE] [--gradebook FILE] [--timeout
-SECONDS]`` runs each notebook in a fresh ``python3`` kernel, keeps going past cells that raise or hang, then
-scores every task itself.
+SECONDS] [--user NAME]`` runs each notebook's cells in a fresh worker process (``sandbox.Worker``), keeps going
+past cells that raise or hang, then scores every task in its own process.
 
 Grading a class
 ---------------
@@ -11,7 +11,7 @@ or ``<student>`` in nbgrader's ``.../submitted/<student>/<assignment>/03_rasteri
 (``student_of``). Two notebooks of one student and lecture are an error naming both; when the notebooks are
 not in per-student folders (two attempts at one lecture side by side in one folder), each notebook stands
 alone, named by its path, as before (``assign_students``). ``--jobs N`` grades N notebooks at once, each in
-its own kernel with its own time limits, from threads (``grade_notebooks``); the results come out in the
+its own worker with its own time limits, from threads (``grade_notebooks``); the results come out in the
 order given, the same as one at a time. The command prints a table, each lost point's reason, and a summary
 per task (the mean points and how many scored 0, 1, ..., max), so the class's hard task shows.
 
@@ -20,46 +20,67 @@ emails and sections; ``--due`` and ``--late-days`` apply a linear late penalty, 
 ``--canvas`` and ``--moodle`` write the LMS imports, ``--feedback`` one Markdown file per notebook, ``--flags`` a
 copy-flag report for the TA (``flags.py``). Scores themselves never depend on them.
 
-How far the grader can be trusted
----------------------------------
-The printed score lines are never read. After a notebook has run, the grader executes one more cell in the
-same kernel: it drops every ``course`` module from ``sys.modules``, imports a fresh ``course.grading.grader``
-(and, through it, fresh ``course.grading`` with its ``registry``, ``helpers`` and ``lecture01`` ... modules,
-and reference implementations) from the same installation as the grader, looks the task functions up by name
-in the notebook's namespace, runs each check under its time limit, and prints the results as JSON tagged with
-a random nonce created for this run. Tasks come from the notebook's ``NN_`` prefix and the registry, never
-from the notebook, and a task whose check cell was deleted scores 0 ("check cell missing"). So printing fake
-score lines, deleting or editing check cells, and monkeypatching ``course.grading`` (``check``,
-``run_check``, ``TASKS``), its modules (``course.grading.helpers``, ``course.grading.lecture03``,
-``course.grading.grader``, ...) or the references in ``course.camera``, ``course.raster``, ``course.shading``
-gain nothing. Results returned as tensor subclasses are turned into plain tensors before they are compared.
-A graded function that can reach the package function it re-implements scores 0 with a message naming it
-(``registry.calls_reference`` reads its code before the check runs); a call hidden on purpose (``getattr``
-with a built string, ``exec``) is not caught, but reading the code shows it.
+What a score can be trusted for
+-------------------------------
+**The verdicts are computed where no student code runs.** The notebook's cells run in a worker process
+(``worker.py``), an IPython shell like Jupyter's kernel, with ``check()`` cells doing nothing there. The grader's
+own process never runs a line of the notebook: it asks the worker for each task's function, and every check
+then runs in the grader, which makes the inputs, computes the expected values with the package's references
+and compares. Each call of the student's function sends the inputs to the worker as plain data and gets plain
+data back (tensors, arrays, numbers, strings, containers: ``remote.py``; nothing is unpickled, nothing that
+comes back can run), and a render function or optimizer the check hands over is called back in the grader,
+autograd included. So nothing the notebook prints, patches (``json``, builtins, torch, ``course.grading``,
+IPython callbacks), writes to stdout, or reads from its own stack can change how the grader scores: the grader
+reads no output of the notebook's and shares no memory with it. Tasks come from the notebook's ``NN_`` prefix,
+never from the notebook; a task whose check cell was deleted scores 0 ("check cell missing").
 
-What it does not protect against: the student's functions run in the grader's process, unsandboxed. Code
-written to attack the grader (patching torch, numpy or builtins, installing import hooks or IPython
-event callbacks, inspecting or patching the grader's frames while a check runs, tampering with stdout)
-is outside this protection. Sabotage of the grader's own cell ends in 0 points, not more. The grader is not a sandbox: do not run
-notebooks you do not trust with your own privileges, and read code whose score surprises you.
+**Time and processes are controlled from outside.** A cell past ``--timeout`` is interrupted, and the worker is
+ended if the cell does not stop; a check past its limit (``DEFAULT_TIMEOUT``) ends the worker (a bare
+``except:`` in the student's code cannot swallow it, since the limit is the grader's), and the next task gets a
+fresh worker with the notebook's cells run again, the cells that hung or killed the worker skipped
+(``NotebookRun``): one runaway task costs only its own points. After each notebook every process it started is
+ended, including double-forked daemons (``sandbox.end_processes``), before any result is written. The worker's
+memory is capped (``--memory``), so a 30 GB allocation fails in the notebook instead of waking the system's
+out-of-memory killer.
+
+**Who the student's code runs as decides what it can touch.** With ``--user NAME`` (the grader running as root,
+as Gradescope's autograder does with its own ``course-student``) the notebook runs as that user: it cannot
+write the course, the grader's files or the results, and every process of that user is ended after each
+notebook. Without it, the notebook runs as you, and can do what you can: read and change your files. The
+grader imports every module it checks with before any notebook runs (``prepare_grader``), runs the checks'
+arithmetic on the torch path (no compiled-kernel cache that a notebook could have rewritten is read), and
+fingerprints the course's files: a notebook that changed one scores 0 ("changed the course's own files"). That
+defeats the attacks tried (``tests/test_grading_attacks.py``), but only a user of its own makes them impossible:
+grade notebooks you do not trust as root with ``--user``.
+
+**What it does not judge.** Copying: a graded function that calls the package function it re-implements scores
+0 ("calls course.camera.look_at ...": the grader reads the notebook's source itself, ``reading.py``, and the
+worker reads the live function, ``registry.calls_reference``), but a call hidden on purpose (``getattr`` with a
+built string, ``exec``), pasted package code or a classmate's code is for the copy flags and a person
+(``flags.py``, whose report also lists code that reaches into the grader, patches modules or forks). And a
+notebook that breaks its own process (patching ``builtins.min``) loses what it breaks: the grader scores what
+comes back, never more.
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import functools
+import hashlib
+import importlib
 import json
-import math
-import os
-import secrets
-import subprocess
+import pkgutil
 import sys
+import warnings
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from . import gradebook
 from .helpers import summarize_exception
-from .registry import DEFAULT_TIMEOUT, TASKS, Result, Task, _task_key, run_check, tasks_for_lecture
+from .registry import DEFAULT_TIMEOUT, CheckTimeout, PeerGone, Result, Task, _task_key, run_check, tasks_for_lecture
+from .reading import reaches_reference
 from .release import CHECK_CALL
+from .sandbox import Isolation, Worker
 from .submissions import DuplicateSubmission, Submission, _lecture_number, student_of
 
 __all__ = ["grade_notebook", "grade_notebooks", "student_of", "assign_students", "Submission",
@@ -68,57 +89,117 @@ __all__ = ["grade_notebook", "grade_notebooks", "student_of", "assign_students",
 
 # ----------------------------------------------------------------------------- grading whole notebooks
 
-_PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])        # the directory that holds course/
-_GRADER_TAG = "course-grader"
-
-# Runs in the student's kernel after every cell of the notebook. Fresh imports, so patches of course.* made
-# by the notebook are gone; the results go out as one line tagged with a nonce the notebook never saw.
-_GRADER_CELL = """\
-def _course_grader_run(nonce, task_ids, timeout, package_root):
-    import importlib, json, os, sys
-    for name in [name for name in sys.modules if name == "course" or name.startswith("course.")]:
-        del sys.modules[name]
-    sys.path.insert(0, package_root)
-    grader = importlib.import_module("course.grading.grader")
-    root = os.path.dirname(os.path.dirname(os.path.dirname(grader.__file__)))      # .../course/grading/grader.py
-    if os.path.realpath(root) != os.path.realpath(package_root):
-        raise RuntimeError("course was imported from " + grader.__file__)
-    results = grader._grade_namespace(globals(), task_ids, timeout)
-    sys.stdout.write("\\n" + nonce + " " + json.dumps(results) + "\\n")
-    sys.stdout.flush()
-_course_grader_run({nonce!r}, {task_ids!r}, {timeout!r}, {root!r})
-"""
-
-
-def _grade_namespace(namespace: dict, task_ids: list[str], timeout: float) -> list[dict]:
-    """Run the checks of ``task_ids`` on the functions of those names in ``namespace`` (the grader cell)."""
-    results = []
-    for task_id in task_ids:
-        t = TASKS[task_id]
-        impl = namespace.get(t.name)
-        if impl is None:
-            result = Result(t.id, t.name, 0, t.points,
-                            f"{t.name} is not defined (did its cell run without errors?)")
-        else:
-            try:
-                result = run_check(task_id, impl, timeout=timeout)
-            except Exception as exc:                                      # a grader bug must not hide the rest
-                result = Result(t.id, t.name, 0, t.points, f"could not check: {summarize_exception(exc)}")
-        results.append({"task": result.task, "points": result.points, "max_points": result.max_points,
-                        "message": result.message})
-    return results
+MAX_RESTARTS = 6                # times one notebook's worker may be started again (a cell or a task ended it)
 
 
 def _missing(tasks: list[Task], message: str) -> list[Result]:
     return [Result(t.id, t.name, 0, t.points, message) for t in tasks]
 
 
-def grade_notebook(path, timeout: float = 60.0) -> list[Result]:
-    """Run ``path`` in a fresh kernel and score the tasks its ``NN_`` prefix names (see the module docstring).
+_IMPORTED = False
 
-    ``timeout`` (seconds) limits every cell; each task check gets ``min(timeout, DEFAULT_TIMEOUT)``. Cells
-    that raise are skipped past, cells that run too long are interrupted; a task whose check cell is gone
-    scores 0, "check cell missing".
+
+def prepare_grader() -> None:
+    """Import every module of the course the checks may use (everything but the benchmarks), once per process,
+    before any student code runs: a notebook that rewrites the course's files afterwards changes nothing the
+    grader runs (``sandbox.py`` says what a user of the student's own adds)."""
+    global _IMPORTED
+    if _IMPORTED:
+        return
+    import course
+    for info in pkgutil.walk_packages(course.__path__, "course."):
+        if not info.name.startswith(("course.bench", "course.__main__")):
+            importlib.import_module(info.name)
+    _IMPORTED = True
+
+
+class NotebookRun:
+    """A notebook's code cells run in a worker (``sandbox.Worker``), and the task functions they define.
+
+    The cells run once, in order, each under the cell time limit. A cell that overruns is interrupted; one that
+    does not stop, or that ends the worker (``os._exit``, the memory limit), is skipped when the worker is
+    started again, which happens when a task's check ends it (a time limit, a crash): the next task finds the
+    notebook's functions defined afresh. ``notes`` say which cells were stopped or skipped."""
+
+    def __init__(self, cells: list[str], files: dict, cell_timeout: float, isolation: Isolation):
+        self.cells, self.files, self.cell_timeout, self.isolation = cells, files, cell_timeout, isolation
+        self.worker: Worker | None = None
+        self.skip: set[int] = set()
+        self.notes: list[str] = []
+        self.starts = 0
+        self.failure = ""
+
+    def ready(self) -> Worker | None:
+        """A live worker that has run the cells, or None (``failure`` says why)."""
+        while self.worker is None or not self.worker.alive:
+            self.end()
+            if self.starts > MAX_RESTARTS or self.failure:
+                self.failure = self.failure or "the notebook ended its process too often to be graded"
+                return None
+            self.starts += 1
+            self.worker = Worker(self.isolation, self.files)
+            try:
+                self.worker.start()
+            except (PeerGone, CheckTimeout, OSError, ValueError) as exc:
+                self.failure = f"the process to run the notebook did not start ({summarize_exception(exc)})"
+                self.end()
+                return None
+            for index, source in enumerate(self.cells):
+                if index in self.skip:
+                    continue
+                status, why = self.worker.run_cell(source, self.cell_timeout)
+                if status in ("timeout", "ended"):
+                    self._note(f"code cell {index + 1}: {why}" + ("; skipped from then on" if status == "ended"
+                                                                   else ""))
+                if status == "ended":
+                    self.skip.add(index)
+                    break
+        return self.worker
+
+    def _note(self, note: str) -> None:
+        if note not in self.notes:
+            self.notes.append(note)
+
+    def grade(self, t: Task, check_timeout: float) -> Result:
+        worker = self.ready()
+        if worker is None:
+            return Result(t.id, t.name, 0, t.points, f"not graded: {self.failure}")
+        try:
+            impl = worker.function(t.name)
+        except (PeerGone, CheckTimeout) as exc:
+            self.end()
+            return Result(t.id, t.name, 0, t.points, f"could not look {t.name} up ({summarize_exception(exc)})")
+        if isinstance(impl, str):
+            stopped = [n for n in self.notes if "stopped" in n or "died" in n]
+            return Result(t.id, t.name, 0, t.points, impl + (f" ({stopped[0]})" if stopped else ""))
+        impl.static_reaches = functools.partial(reaches_reference, self.cells, t.name)   # read here, too
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                result = run_check(t.id, impl, timeout=check_timeout)
+        except Exception as exc:                                          # a grader bug must not hide the rest
+            result = Result(t.id, t.name, 0, t.points, f"could not check: {summarize_exception(exc)}")
+        if worker.alive:
+            try:
+                worker.forget()
+            except (PeerGone, CheckTimeout):
+                self.end()
+        else:
+            self.end()                                                    # a fresh worker for the next task
+        return result
+
+    def end(self) -> None:
+        if self.worker is not None:
+            self.worker.end()
+            self.worker = None
+
+
+def grade_notebook(path, timeout: float = 60.0, isolation: Isolation | None = None) -> list[Result]:
+    """Run ``path``'s cells in a worker and score the tasks its ``NN_`` prefix names (see the module docstring).
+
+    ``timeout`` (seconds) limits every cell; each task check gets ``min(timeout, DEFAULT_TIMEOUT)``. Cells that
+    raise are skipped past, cells that run too long are interrupted; a task whose check cell is gone scores 0,
+    "check cell missing". ``isolation``: who the student's code runs as, and its limits (``sandbox.Isolation``).
     """
     path = Path(path)
     number = _lecture_number(path)
@@ -127,64 +208,41 @@ def grade_notebook(path, timeout: float = 60.0) -> list[Result]:
         return []
     try:
         nb = _read_notebook(path)
+        files = {path.name: path.read_bytes()}
     except Exception as exc:
         return _missing(tasks, f"could not read the notebook: {summarize_exception(exc)}")
+    prepare_grader()
     present = {match.group(1) for cell in nb.cells if cell.cell_type == "code"
                for match in CHECK_CALL.finditer(cell.source)}                # tasks that have a check cell
-    outputs, note = _execute_with_grader(nb, path, [t.id for t in tasks], timeout)
-    scored = {r["task"]: r for r in outputs or []}
-    results = []
-    for t in tasks:
-        if t.id not in present:
-            results.append(Result(t.id, t.name, 0, t.points, "check cell missing"))
-        elif t.id in scored:
-            r = scored[t.id]
-            points = max(0, min(int(r["points"]), t.points))
-            results.append(Result(t.id, t.name, points, t.points, str(r["message"])))
-        else:
-            results.append(Result(t.id, t.name, 0, t.points, note or "not graded"))
+    cells = [cell.source for cell in nb.cells if cell.cell_type == "code"]
+    run = NotebookRun(cells, files, max(1.0, float(timeout)), isolation or Isolation())
+    check_timeout = float(min(timeout, DEFAULT_TIMEOUT))
+    before = fingerprint(course_files())
+    try:
+        results = [run.grade(t, check_timeout) if t.id in present else
+                   Result(t.id, t.name, 0, t.points, "check cell missing") for t in tasks]
+    finally:
+        run.end()                                                         # every process of the student's
+    changed = [name for name, digest in fingerprint(course_files()).items() if before.get(name) != digest]
+    if changed:
+        names = ", ".join(Path(n).name for n in changed[:5])
+        return _missing(tasks, f"not graded: the notebook changed the course's own files ({names})")
     return results
+
+
+def course_files() -> list[Path]:
+    """Every Python file of the installed course: what a notebook run as the grader's own user could rewrite."""
+    return sorted(Path(__file__).resolve().parents[1].rglob("*.py"))
+
+
+def fingerprint(files: list[Path]) -> dict[str, str]:
+    """The sha256 of each file (or "missing"), to tell afterwards whether a notebook changed one."""
+    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "missing" for p in files}
 
 
 def _read_notebook(path: Path):
     import nbformat
     return nbformat.read(str(path), as_version=4)
-
-
-def _execute_with_grader(nb, path: Path, task_ids: list[str], timeout: float):
-    """Execute the notebook plus the grader cell; (the grader's results or None, why they are missing)."""
-    import nbformat
-    from nbclient import NotebookClient
-    from nbclient.exceptions import DeadKernelError
-
-    nonce = secrets.token_hex(16)
-    check_timeout = float(min(timeout, DEFAULT_TIMEOUT))
-    source = _GRADER_CELL.format(nonce=nonce, task_ids=task_ids, timeout=check_timeout, root=_PACKAGE_ROOT)
-    nb.cells.append(nbformat.v4.new_code_cell(source, metadata={"tags": [_GRADER_TAG]}))
-    grader_cell = nb.cells[-1]
-    cell_timeout = max(1, math.ceil(timeout))
-    grader_timeout = math.ceil(check_timeout * len(task_ids)) + cell_timeout + 60   # imports, every check
-    client = NotebookClient(
-        nb, kernel_name="python3", allow_errors=True, interrupt_on_timeout=True, shutdown_kernel="immediate",
-        timeout_func=lambda cell: grader_timeout if cell is grader_cell else cell_timeout,
-        error_on_timeout={"ename": "CellTimeout", "evalue": f"stopped after {cell_timeout} s", "traceback": []},
-        resources={"metadata": {"path": str(path.parent.resolve())}})
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (_PACKAGE_ROOT, env.get("PYTHONPATH")) if p)
-    try:
-        client.execute(env=env, stderr=subprocess.DEVNULL)                 # kernel chatter is not a result
-    except DeadKernelError:
-        return None, "the kernel died while running the notebook (sys.exit? out of memory?)"
-    except Exception as exc:                                                # kernel did not start, ...
-        return None, f"the notebook could not be run: {summarize_exception(exc)}"
-    text = "".join(o.get("text", "") for o in grader_cell.get("outputs", []) if o.get("output_type") == "stream")
-    found = text.rfind(nonce + " ")
-    if found < 0:
-        errors = [f"{o.get('ename')}: {o.get('evalue')}" for o in grader_cell.get("outputs", [])
-                  if o.get("output_type") == "error"]
-        return None, "grading did not finish" + (f" ({errors[0]})" if errors else "")
-    line = text[found + len(nonce) + 1:].split("\n", 1)[0]
-    return json.loads(line), ""
 
 
 # ------------------------------------------------------------------------------- a class of notebooks
@@ -239,37 +297,42 @@ def one_student(paths, name: str) -> list[Submission]:
     return submissions
 
 
-def grade_notebooks(paths, timeout: float = 60.0, jobs: int = 1, progress: bool = True) -> list[list[Result]]:
+def grade_notebooks(paths, timeout: float = 60.0, jobs: int = 1, progress: bool = True,
+                    isolation: Isolation | None = None) -> list[list[Result]]:
     """``grade_notebook`` for each of ``paths``, ``jobs`` at a time; the results in the order of ``paths``.
 
-    Every notebook still runs in its own fresh kernel with its own time limits, so the results are the same
-    for any ``jobs``. With ``jobs`` > 1 threads drive the kernels (the work runs in the kernels' processes):
-    grading one notebook shares no state with another, as each call has its own notebook object, nonce,
-    grader cell, client, kernel and (nbclient's, per thread) event loop. Each kernel takes its own memory
-    (about 270 MB for lecture 03). A progress bar (tqdm) counts finished notebooks on stderr; TQDM_DISABLE=1
-    or ``progress=False`` hides it.
+    Every notebook runs in its own worker with its own time limits, so the results are the same for any ``jobs``.
+    With ``jobs`` > 1 threads drive the workers (the work runs in the workers' processes and in the checks, which
+    share nothing between notebooks). Each worker takes its own memory (about 400 MB for lecture 03). With a user
+    of the students' own (``isolation.user``) one notebook is graded at a time, since every process of that user
+    is ended after each. A progress bar (tqdm) counts finished notebooks on stderr; TQDM_DISABLE=1 or
+    ``progress=False`` hides it.
     """
     from tqdm.auto import tqdm
 
     paths = [Path(p) for p in paths]
     if int(jobs) != jobs or jobs < 1:
         raise ValueError(f"jobs is how many notebooks to grade at once, at least 1; got {jobs!r}")
+    if jobs > 1 and isolation is not None and isolation.user:
+        raise ValueError("with --user one notebook is graded at a time (every process of that user is ended after "
+                         "each notebook): leave --jobs out")
+    prepare_grader()
     results: list[list[Result] | None] = [None] * len(paths)
     bar_options = {} if progress else {"disable": True}          # unset, tqdm reads TQDM_DISABLE
     with tqdm(total=len(paths), desc="grading", unit="notebook", file=sys.stderr, **bar_options) as bar:
         if jobs == 1 or len(paths) < 2:
             for k, path in enumerate(paths):
-                results[k] = grade_notebook(path, timeout=timeout)
+                results[k] = grade_notebook(path, timeout=timeout, isolation=isolation)
                 bar.update()
             return results
         pool = ThreadPoolExecutor(max_workers=min(int(jobs), len(paths)), thread_name_prefix="grade")
         try:
-            futures = {pool.submit(grade_notebook, path, timeout): k for k, path in enumerate(paths)}
+            futures = {pool.submit(grade_notebook, path, timeout, isolation): k for k, path in enumerate(paths)}
             for future in as_completed(futures):                          # completion order ...
                 results[futures[future]] = future.result()                # ... stored in the given order
                 bar.update()
         finally:
-            pool.shutdown(wait=True, cancel_futures=True)                 # Ctrl-C: no new kernels start
+            pool.shutdown(wait=True, cancel_futures=True)                 # Ctrl-C: no new workers start
     return results
 
 
@@ -358,12 +421,13 @@ def cli(argv: list[str] | None = None) -> int:
     ``--due``, ``--late-days``, ``--canvas``, ``--moodle``, ``--feedback``, ``--flags``)."""
     parser = argparse.ArgumentParser(
         prog="python -m course grade",
-        description="Run each notebook in a fresh kernel and score its tasks (tasks come from the NN_ prefix). "
+        description="Run each notebook's cells in a worker process of their own and score its tasks in this one "
+                    "(tasks come from the NN_ prefix). "
                     "The student is the folder above the notebook (class/<student>/03_rasterization.ipynb), "
                     "or <student> in nbgrader's submitted/<student>/<assignment>/.")
     parser.add_argument("notebooks", nargs="+", type=Path, metavar="NOTEBOOK")
     parser.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
-                        help="grade N notebooks at once, each in its own kernel (default: 1); same results, "
+                        help="grade N notebooks at once, each in its own worker (default: 1); same results, "
                              "N times the memory")
     parser.add_argument("--students", choices=STUDENT_MODES, default="auto",
                         help="folder: the student comes from the path, two notebooks of one student and lecture "
@@ -382,6 +446,12 @@ def cli(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=60.0, metavar="SECONDS",
                         help=f"time limit for each cell (default: 60); each task check gets at most "
                              f"{DEFAULT_TIMEOUT:g} s")
+    parser.add_argument("--user", metavar="NAME",
+                        help="run the notebooks' code as this unprivileged user (the grader must run as root): it "
+                             "cannot touch your files, and every process it starts is ended after each notebook; "
+                             "without it the code runs as you (see course/grading/sandbox.py)")
+    parser.add_argument("--memory", type=float, default=Isolation.memory_gb, metavar="GB",
+                        help=f"address space each notebook may use (default: {Isolation.memory_gb:g})")
     gradebook.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.jobs < 1:
@@ -393,6 +463,12 @@ def cli(argv: list[str] | None = None) -> int:
         return 2
     mode = "folder" if args.gradebook and args.students == "auto" else args.students
     try:
+        isolation = Isolation(user=args.user, memory_gb=args.memory)
+        if args.user:
+            Worker(isolation)                                     # checks the user exists and can be switched to
+        if args.jobs > 1 and args.user:
+            raise ValueError("with --user one notebook is graded at a time (every process of that user is ended "
+                             "after each notebook): leave --jobs out")
         if args.student is not None:
             submissions, by_student, note = one_student(args.notebooks, args.student), True, ""
         else:
@@ -407,7 +483,10 @@ def cli(argv: list[str] | None = None) -> int:
         if s.lecture is None or not tasks_for_lecture(s.lecture):
             print(f"warning: {s.path}: no graded tasks for this notebook (its name must start with a lecture "
                   "number that has tasks, e.g. 01_)", file=sys.stderr)
-    results = grade_notebooks([s.path for s in submissions], timeout=args.timeout, jobs=args.jobs)
+    from .. import kernels
+    with kernels.using("torch"):             # the checks' own arithmetic: no compiled-kernel cache that the
+        results = grade_notebooks([s.path for s in submissions], timeout=args.timeout,  # notebooks' code could
+                                  jobs=args.jobs, isolation=isolation)                  # have rewritten is read
     graded = list(zip(submissions, results))
     task_ids = sorted({r.task for _, rs in graded for r in rs}, key=_task_key)
     print(_table(graded, task_ids, by_student))

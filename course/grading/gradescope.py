@@ -5,7 +5,8 @@ posts the scores to the LMS; the course provides the autograder. The zip holds, 
 
     setup.sh             run once when Gradescope builds the image: Python, a virtual environment in
                          /autograder/venv, torch (CPU build, pinned) from requirements.txt, then the course from
-                         the wheel in this zip (its dependencies from the package index)
+                         the wheel in this zip (its dependencies from the package index), every compiled kernel
+                         warmed, and ``course-student``, the user the students' code runs as
     run_autograder       run per submission: grades /autograder/submission, writes /autograder/results/results.json
     requirements.txt     torch==<the version this course was built with>, from PyTorch's CPU index
     course-<v>-py3-none-any.whl    the course, built from this checkout when the zip was built
@@ -14,29 +15,30 @@ posts the scores to the LMS; the course provides the autograder. The zip holds, 
 
 Both scripts read the root from ``AUTOGRADER_ROOT`` (default ``/autograder``), so the autograder runs anywhere, and
 ``run_autograder`` runs ``AUTOGRADER_PYTHON`` (default ``$AUTOGRADER_ROOT/venv/bin/python``): the tests run it on
-a temporary root with their own interpreter.
+a temporary root with their own interpreter. ``AUTOGRADER_USER`` names the students' user (default
+``course-student``; empty: none), ``AUTOGRADER_WORKER_PYTHON`` the interpreter of the worker that runs the
+notebook (default: the autograder's).
 
-What a submission gets (``grade_submission``): the notebook runs with the course's grader (``grade_notebook``: a
-fresh kernel, every check run by the grader itself, per-cell and per-check time limits), and results.json holds
-one test per task (``name`` "Task 3.2 barycentric", ``number``, ``score``, ``max_score``, ``status``, ``output``:
-the diagnosis a check cell prints, ``visibility``), the total ``score``, the ``execution_time`` and an ``output``
-saying which notebook was graded. Which notebook: the only one submitted (graded under the exercise's name,
-whatever it was called), or among several the one named like the exercise; several others, none, a file that is
-not a notebook, or the exercise unmodified score 0 with the reason in ``output`` and in every test, never a crash.
-results.json is written after the notebook's kernel is gone, replacing anything the notebook wrote there.
+What a submission gets (``grade_submission``): the notebook runs with the course's grader (``grade_notebook``: its
+cells in a worker process of their own, every check run in the grader's process, per-cell and per-check time
+limits), and results.json holds one test per task (``name`` "Task 3.2 barycentric", ``number``, ``score``,
+``max_score``, ``status``, ``output``: the diagnosis a check cell prints, ``visibility``), the total ``score``,
+the ``execution_time`` and an ``output`` saying which notebook was graded. Which notebook: the only one submitted
+(graded under the exercise's name, whatever it was called), or among several the one named like the exercise;
+several others, none, a file that is not a notebook, or the exercise unmodified score 0 with the reason in
+``output`` and in every test, never a crash.
 
-Limits: as with ``grade``, the student's code runs unsandboxed inside the container, as Gradescope's user (root).
-It cannot fake the grader's results (see ``grader.py``); a notebook that rewrites the grader's installed files
-(course/grading, the lecture's reference modules; ``grader_files``) scores 0, since their hashes are compared
-before and after it runs. Code written to attack the autograder could still leave a process behind that writes
-results.json after the autograder has finished. Gradescope shows you every submission's files: read the code
-behind a surprising score.
+What is protected (``grader.py`` says how): on Gradescope the autograder runs as root and the notebook's code as
+``course-student``, which can write neither the course, nor the autograder's files, nor ``results/``; the scores
+are computed in the autograder's own process from plain data; every process of ``course-student`` is ended,
+last, before results.json is written, and none of them ever holds the autograder's output (the worker's stdin,
+stdout and stderr are ``/dev/null``). Run locally without root (``AUTOGRADER_USER`` empty), the notebook runs as
+the autograder's user, with the protections ``sandbox.py`` lists for that case. Gradescope shows you every
+submission's files: the copy flags (``python -m course grade ... --flags``) read them for you.
 """
 from __future__ import annotations
 
 import argparse
-import hashlib
-import importlib
 import json
 import os
 import shutil
@@ -50,13 +52,15 @@ from pathlib import Path
 
 from .release import sources_sha256
 from .registry import Result, tasks_for_lecture
+from .sandbox import Isolation, end_user_processes
 from .workspace import find_exercise
 
 __all__ = ["build_autograder", "build_wheel", "setup_script", "run_script", "run_autograder", "grade_submission",
-           "pick_notebook", "results_json", "VISIBILITY", "cli"]
+           "pick_notebook", "results_json", "isolation_here", "VISIBILITY", "STUDENT_USER", "cli"]
 
 VISIBILITY = ("visible", "after_due_date", "after_published", "hidden")      # Gradescope's four settings
 CONFIG = "autograder.json"
+STUDENT_USER = "course-student"                                               # setup.sh creates it
 TORCH_INDEX = "https://download.pytorch.org/whl/cpu"                         # the CPU builds of torch
 _SKIPPED = ("__MACOSX", ".ipynb_checkpoints")                                  # zip and Jupyter leftovers
 
@@ -65,7 +69,7 @@ _SKIPPED = ("__MACOSX", ".ipynb_checkpoints")                                  #
 
 def setup_script(wheel: str) -> str:
     """``setup.sh``: everything from the zip's own files (``wheel``: the course's wheel file name), except the
-    packages the course depends on, which come from the package index."""
+    packages the course depends on, which come from the package index; and the students' own user."""
     return f"""#!/usr/bin/env bash
 # Gradescope runs this once, as root, while it builds the autograder's image (python -m course gradescope).
 set -euo pipefail
@@ -79,8 +83,10 @@ python3 -m venv "$ROOT/venv"
 "$ROOT/venv/bin/pip" install --no-cache-dir -r "$SOURCE/requirements.txt"
 # the course from the wheel built with this zip; its other dependencies from the package index
 "$ROOT/venv/bin/pip" install --no-cache-dir "$SOURCE/{wheel}"
-# compile the Numba kernels once, into the image, so that no submission waits for them
-"$ROOT/venv/bin/python" -m course render --out /tmp/course-warm-up.png
+# compile every Numba kernel once, into the image, so that no submission waits for them
+"$ROOT/venv/bin/python" -c "from course import kernels; kernels.warm_up()"
+# the user the students' code runs as: it can read the course and write only its own folder
+id -u {STUDENT_USER} >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin {STUDENT_USER}
 """
 
 
@@ -93,6 +99,7 @@ set -uo pipefail
 export AUTOGRADER_ROOT="${AUTOGRADER_ROOT:-/autograder}"
 PYTHON="${AUTOGRADER_PYTHON:-$AUTOGRADER_ROOT/venv/bin/python}"
 export TQDM_DISABLE=1 PYTHONHASHSEED=0
+cd "$(dirname "$0")"                 # python -c imports from the folder it starts in first: one the students can't write
 exec "$PYTHON" -c 'import sys; from course.grading.gradescope import run_autograder; sys.exit(run_autograder())'
 """
 
@@ -225,23 +232,28 @@ def _zero(lecture: int, why: str) -> list[Result]:
     return [Result(t.id, t.name, 0, t.points, why) for t in tasks_for_lecture(lecture)]
 
 
-def grader_files(lecture: int) -> list[Path]:
-    """The files a score of ``lecture`` depends on: course/grading/*.py (the grader and the checks) and the
-    modules of the lecture's reference implementations."""
-    grading = Path(__file__).resolve().parent
-    modules = {t.reference[0] for t in tasks_for_lecture(lecture) if t.reference}
-    references = [Path(importlib.import_module(m).__file__).resolve() for m in sorted(modules)]
-    return sorted(set(grading.glob("*.py")) | set(references))
+def isolation_here() -> Isolation:
+    """Who the students' code runs as here: ``AUTOGRADER_USER`` (default ``STUDENT_USER``, which setup.sh creates)
+    when the autograder runs as root and that user exists, as on Gradescope; otherwise the autograder's own user
+    (a local run: ``sandbox.py`` says what that cannot protect). ``AUTOGRADER_WORKER_PYTHON`` picks the worker's
+    interpreter (default: the autograder's)."""
+    user = os.environ.get("AUTOGRADER_USER", STUDENT_USER)
+    python = os.environ.get("AUTOGRADER_WORKER_PYTHON") or None
+    if user and hasattr(os, "geteuid") and os.geteuid() == 0:
+        import pwd
+        try:
+            pwd.getpwnam(user)
+            return Isolation(user=user, python=python)
+        except KeyError:
+            pass
+    return Isolation(python=python)
 
 
-def fingerprint(files: list[Path]) -> dict[str, str]:
-    """The sha256 of each file (or "missing"), to tell afterwards whether a notebook changed one."""
-    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "missing" for p in files}
-
-
-def grade_submission(folder, config: dict, exercise: Path) -> tuple[list[Result], str]:
+def grade_submission(folder, config: dict, exercise: Path, isolation: Isolation | None = None) \
+        -> tuple[list[Result], str]:
     """Grade the submission in ``folder`` for the autograder ``config``: (one Result per task, the message for
-    the whole submission). ``exercise``: the released exercise notebook."""
+    the whole submission). ``exercise``: the released exercise notebook; ``isolation``: who the student's code
+    runs as (``isolation_here``)."""
     import nbformat
 
     from .grader import grade_notebook
@@ -263,16 +275,10 @@ def grade_submission(folder, config: dict, exercise: Path) -> tuple[list[Result]
     notes = [message] if message else []
     if path.name != expected:
         notes.append(f"{path.name} was graded as {expected}.")
-    files = grader_files(lecture)
-    before = fingerprint(files)                                          # the student's code runs as we do:
-    with tempfile.TemporaryDirectory(prefix="submission-") as tmp:      # the kernel works in a folder of its own
+    with tempfile.TemporaryDirectory(prefix="submission-") as tmp:      # graded under the exercise's name
         graded = Path(tmp) / expected
         shutil.copyfile(path, graded)
-        results = grade_notebook(graded, timeout=float(config.get("timeout", 60.0)))
-    changed = [Path(p).name for p, digest in fingerprint(files).items() if before[p] != digest]
-    if changed:                                                          # ... a rewritten check scores nothing
-        why = f"the notebook changed the grader's own files ({', '.join(changed)}): not graded"
-        return _zero(lecture, why), " ".join(notes + [why[0].upper() + why[1:] + "."])
+        results = grade_notebook(graded, timeout=float(config.get("timeout", 60.0)), isolation=isolation)
     return results, " ".join(notes)
 
 
@@ -303,23 +309,33 @@ def _write_results(root: Path, data: dict) -> Path:
 def run_autograder(root=None) -> int:
     """Grade ``root/submission`` and write ``root/results/results.json`` (root: ``AUTOGRADER_ROOT`` or
     /autograder). Never ends without a results.json: a failure of the autograder itself scores 0 and says so."""
+    from .. import kernels
+    from .grader import prepare_grader
+
     root = Path(root or os.environ.get("AUTOGRADER_ROOT", "/autograder"))
     start = time.monotonic()
     config = {"exercise": "the exercise", "visibility": "visible"}
+    isolation = isolation_here()
     try:
         config = json.loads((root / "source" / CONFIG).read_text(encoding="utf-8"))    # read before anything runs
         exercise = root / "source" / "exercise" / config["exercise"]
-        results, message = grade_submission(root / "submission", config, exercise)
+        prepare_grader()                                                  # everything imported before it runs
+        with kernels.using("torch"):                                      # and no compiled-kernel cache read
+            results, message = grade_submission(root / "submission", config, exercise, isolation)
     except Exception as exc:                                              # the autograder's own failure
         lecture = config.get("lecture")
         results = _zero(int(lecture), "not graded: the autograder failed") if lecture is not None else []
         message = (f"The autograder itself failed ({type(exc).__name__}: {exc}); this is not your fault: tell your "
                    "instructor.")
+    if isolation.user:                                                    # last, before the results: nothing
+        end_user_processes(isolation.user)                                # of the student's is left running
     data = results_json(results, message, config, time.monotonic() - start)
     path = _write_results(root, data)
     for r in results:                                                     # stdout: for the instructor
         print(f"Task {r.task} {r.name}: {r.points}/{r.max_points} {r.message}".rstrip())
     print(f"{data['output']}\nwrote {path}")
+    print(f"graded with the course from {Path(__file__).resolve().parents[2]}, the students' code running as "
+          f"{isolation.user or 'this user (no user of its own: see course/grading/sandbox.py)'}")
     return 0
 
 

@@ -217,18 +217,28 @@ def _is_library(filename: str) -> bool:
     return os.path.realpath(filename).startswith(_LIBRARY_DIRS) or filename.startswith("<frozen")
 
 
+def _frames(exc: BaseException) -> list[tuple[str, int, str, str, bool]]:
+    """(file, line number, function, line, in a library?) of each frame of ``exc``'s traceback; for an exception
+    raised in the student's process (``remote.RemoteError``), the frames that process reported."""
+    remote = getattr(exc, "remote_frames", None)
+    if remote:
+        return [(str(f[0]), int(f[1]), str(f[2]), str(f[3]), bool(f[4])) for f in remote]
+    return [(f.filename, f.lineno, f.name, f.line or "", _is_library(f.filename))
+            for f in traceback.extract_tb(exc.__traceback__)]
+
+
 def _student_frame(exc: BaseException):
     """The innermost traceback frame in the student's code (not the package, torch or the standard library)."""
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not _is_library(f.filename)]
+    frames = [f for f in _frames(exc) if not f[4]]
     return frames[-1] if frames else None
 
 
 def _not_attempted(exc: BaseException) -> bool:
     """True for the exercise's own ``raise NotImplementedError()``, not one from deep inside a library."""
-    frames = traceback.extract_tb(exc.__traceback__)
-    if not frames or _is_library(frames[-1].filename):
+    frames = _frames(exc)
+    if not frames or frames[-1][4]:
         return False
-    return "NotImplementedError" in (frames[-1].line or "NotImplementedError")
+    return "NotImplementedError" in (frames[-1][3] or "NotImplementedError")
 
 
 def summarize_exception(exc: BaseException) -> str:
@@ -237,8 +247,8 @@ def summarize_exception(exc: BaseException) -> str:
     text = re.sub(r"0x[0-9a-fA-F]+", "0x…", text)                           # no memory addresses in outputs
     text = f"{type(exc).__name__}: {text[:200]}" if text else type(exc).__name__
     frame = _student_frame(exc)
-    if frame is not None and frame.line:
-        text += f" (line {frame.lineno} in {frame.name}: `{frame.line.strip()[:80]}`)"
+    if frame is not None and frame[3]:
+        text += f" (line {frame[1]} in {frame[2]}: `{frame[3].strip()[:80]}`)"
     return text
 
 

@@ -36,11 +36,11 @@ doing the task's work, scores 0.
 from __future__ import annotations
 
 import math
-import traceback
 
 import torch
 
-from .helpers import Fail, _call, _close, _not_attempted, compare, generator, grade_parts, require, to_tensor
+from .helpers import (Fail, _call, _close, _frames, _not_attempted, compare, generator, grade_parts, require,
+                      to_tensor)
 from .registry import forbidden_call, task
 
 __all__ = ["best_step_reference", "boundary_term_reference", "triangle_term_reference", "edge_sample_reference"]
@@ -361,9 +361,9 @@ def _triangle_problem(impl, args, label) -> str | None:
     try:
         got = to_tensor(_call(impl, *args), name)
     except NotImplementedError as exc:                                    # boundary_term not written yet?
-        frames = traceback.extract_tb(exc.__traceback__)
-        if frames and frames[-1].name != getattr(impl, "__name__", None) and _not_attempted(exc):
-            raise Fail(f"{name}: {frames[-1].name}, which it calls, is not written yet: write it first "
+        frames = _frames(exc)
+        if frames and frames[-1][2] != getattr(impl, "__name__", None) and _not_attempted(exc):
+            raise Fail(f"{name}: {frames[-1][2]}, which it calls, is not written yet: write it first "
                        "(task 9.2)") from None
         raise
     expected = _triangle(*args).to(color.dtype)

@@ -14,6 +14,7 @@ followed by an indented hint only when points are lost.
 from __future__ import annotations
 
 import functools
+import os
 import signal
 import textwrap
 import threading
@@ -25,7 +26,8 @@ from typing import Callable
 
 from .helpers import _is_library, _not_attempted, summarize_exception
 
-__all__ = ["DEFAULT_TIMEOUT", "Task", "Result", "TASKS", "task", "tasks_for_lecture", "CheckTimeout", "run_check",
+__all__ = ["DEFAULT_TIMEOUT", "Task", "Result", "TASKS", "task", "tasks_for_lecture", "CheckTimeout", "PeerGone",
+           "run_check",
            "format_result", "check", "calls_reference"]
 
 DEFAULT_TIMEOUT = 10.0          # seconds one task check may take in a notebook
@@ -137,6 +139,9 @@ def calls_reference(fn, module: str, qualname: str, _seen=None) -> bool:
     reached from ``fn`` together with the reference's name among the names its code uses. Functions the
     student wrote are followed (helpers, ``functools.partial``, callable objects); package functions other
     than the reference are not, since calling them is allowed where a task says so. Static: nothing runs."""
+    remote = getattr(type(fn), "reaches", None)
+    if remote is not None:                                               # a function in the student's process:
+        return bool(remote(fn, module, qualname))                        # read there (``remote.RemoteFunction``)
     seen = set() if _seen is None else _seen
     if id(fn) in seen or len(seen) > 200:
         return False
@@ -176,6 +181,12 @@ def calls_reference(fn, module: str, qualname: str, _seen=None) -> bool:
 
 class CheckTimeout(BaseException):
     """A check ran past its time limit (a BaseException, so ``except Exception`` in student code can't eat it)."""
+
+
+class PeerGone(BaseException):
+    """The process running the student's code has gone (its pipe closed): it died, or was ended (``remote.py``).
+    A BaseException, like CheckTimeout, so that no ``except Exception`` between the call and the grader takes it
+    for an error of the student's function."""
 
 
 def _call_with_time_limit(fn, seconds):
@@ -247,10 +258,11 @@ def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT, *, al
             return Result(t.id, t.name, 0, t.points,
                           f"{t.name} calls {module}.{qualname}, the package function this task re-implements: "
                           "write it yourself (other package functions are fine where the task says so)")
-    try:
+    limit = getattr(impl, "time_limit", None) or _call_with_time_limit   # a function in another process is
+    try:                                                                  # stopped from outside it
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")                               # keep check output deterministic
-            points, message = _call_with_time_limit(lambda: t.check(impl), timeout)
+            points, message = limit(lambda: t.check(impl), timeout)
     except NotImplementedError as exc:
         if not _not_attempted(exc):
             return Result(t.id, t.name, 0, t.points, summarize_exception(exc))
@@ -259,6 +271,10 @@ def run_check(task_id: str, impl, timeout: float | None = DEFAULT_TIMEOUT, *, al
     except CheckTimeout:
         return Result(t.id, t.name, 0, t.points,
                       f"stopped after {timeout:g} s: {t.name} did not finish (an endless loop?)")
+    except PeerGone as gone:
+        return Result(t.id, t.name, 0, t.points,
+                      f"the process running the notebook died while {t.name} ran ({gone}): out of memory, or "
+                      "exit() / os._exit() in the code?")
     except KeyboardInterrupt:
         raise
     except BaseException as exc:                                          # incl. SystemExit from exit()
@@ -322,7 +338,14 @@ def _explain_undefined_task_functions() -> None:
 
 
 def check(task_id: str, impl, *, timeout: float | None = DEFAULT_TIMEOUT) -> Result:
-    """For notebook check cells: print the score line (and a hint if points were lost); return the Result."""
+    """For notebook check cells: print the score line (and a hint if points were lost); return the Result.
+
+    In the process the grader runs a notebook in (``COURSE_GRADING_WORKER`` set, ``worker.py``) it does nothing:
+    the grader runs every check itself, in its own process."""
+    if os.environ.get("COURSE_GRADING_WORKER"):
+        t = TASKS.get(str(task_id))
+        return Result(str(task_id), t.name if t else "?", 0, t.points if t else 0, "checked by the grader",
+                      printed=True)
     try:
         result = run_check(task_id, impl, timeout=timeout)
     except KeyboardInterrupt:
