@@ -148,6 +148,26 @@ def rename_locals(source: str, name: str | None = None, prefix: str = "my_") -> 
     return ast.unparse(_Rename({n: f"{prefix}{n}_{k}" for k, n in enumerate(sorted(local))}).visit(tree)) + "\n"
 
 
+def parenthesise(source: str) -> str:
+    """``source`` with every operand of every operator, comparison and call wrapped in parentheses of its own: the
+    same program, written to defeat a comparison of tokens (``(a) - (b)`` for ``a - b``)."""
+    lines = source.splitlines(keepends=True)
+    starts = [0]
+    for line in lines:
+        starts.append(starts[-1] + len(line))
+    spans = []
+    for node in ast.walk(ast.parse(source)):
+        operands = {ast.BinOp: lambda n: [n.left, n.right], ast.Compare: lambda n: [n.left, *n.comparators],
+                    ast.UnaryOp: lambda n: [n.operand], ast.Call: lambda n: list(n.args)}.get(type(node))
+        for o in operands(node) if operands else []:
+            spans.append((starts[o.lineno - 1] + o.col_offset, starts[o.end_lineno - 1] + o.end_col_offset))
+    marks = sorted([(end, 0, ")") for _, end in spans] + [(start, 1, "(") for start, _ in spans], reverse=True)
+    for position, _, mark in marks:                                    # from the end: earlier offsets stay
+        source = source[:position] + mark + source[position:]
+    ast.parse(source)
+    return source
+
+
 def reference_source(task_id: str) -> str:
     """The source of the package function task ``task_id`` re-implements."""
     module, qualname = TASKS[task_id].reference

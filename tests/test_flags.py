@@ -12,7 +12,7 @@ import math
 import pytest
 import torch
 
-from class_fixtures import HONEST, ROOT, exercise_with, pasted_reference, rename_locals, write
+from class_fixtures import HONEST, ROOT, exercise_with, parenthesise, pasted_reference, rename_locals, write
 from course.grading import TASKS, run_check
 from course.grading import flags
 
@@ -109,6 +109,64 @@ def test_a_classmates_code_with_renamed_names_and_reordered_lines_is_flagged():
     assert score >= flags.THRESHOLD, f"{score:.2f}"
 
 
+@pytest.mark.parametrize("task_id, k", [(t, k) for t in sorted(HONEST) for k in range(2)])
+def test_a_copy_renamed_and_parenthesised_is_flagged(task_id, k):
+    """Measured before the canonical form: 0.21-0.68 (a run of 8 tokens broken by every added bracket)."""
+    source = HONEST[task_id][k]
+    disguised = parenthesise(rename_locals(source, prefix="x"))
+    assert disguised.count("(") > source.count("(") + 10
+    score, _ = flags.similarity(student(task_id, source, "ana"), student(task_id, disguised, "cat"))
+    assert score >= flags.THRESHOLD, f"{score:.2f}"
+
+
+def test_the_canonical_form_undoes_what_does_not_change_the_program():
+    disguised = ('def g(x, y):\n    """doc"""\n    from torch import sin as s\n    v = (x * 2) * 1 + 0\n'
+                 "    u = (x) + (y)\n    v += 0 * 3\n    return s((u)) + -(-v)\n")
+    canonical, rows = flags.canonical(disguised, {"s": "torch.sin"})
+    assert "torch.sin(u)" in canonical and "(x)" not in canonical and "* 1" not in canonical
+    assert "doc" not in canonical and "-(-" not in canonical and "v = v + 0" in canonical
+    assert canonical.index("v = x * 2") < canonical.index("u = x + y")        # independent: one order
+    assert rows[canonical.splitlines().index("    u = x + y")] == 4          # mapped to its own line
+    plain = "def f(p, q):\n    a = p + q\n    b = p * 2\n    return torch.sin(a) + b\n"
+    swapped = "def f(p, q):\n    b = p * 2\n    a = p + q\n    return torch.sin(a) + b\n"
+    assert flags.canonical_tokens(plain)[0] == flags.canonical_tokens(swapped)[0]
+    aliased = "def f(p, q):\n    from torch import sin\n    b = p * 2\n    a = p + q\n    return sin(a) + b\n"
+    assert flags.canonical_tokens(aliased)[0][-12:] == flags.canonical_tokens(plain)[0][-12:]
+    dependent = "def f(p):\n    a = p + 1\n    p = a * 2\n    return p\n"      # a write after a read: kept in order
+    assert flags.canonical(dependent)[0].index("a = p + 1") < flags.canonical(dependent)[0].index("p = a * 2")
+
+
+GRAM = ["def gram_matrix(features):\n    B, C, H, W = features.shape\n    flat = features.reshape(B, C, H * W)\n"
+        "    return flat @ flat.transpose(1, 2) / (H * W)\n",
+        "def gram_matrix(x):\n    b, c, h, w = x.shape\n    f = x.reshape(b, c, h * w)\n"
+        "    return f @ f.transpose(1, 2) / (h * w)\n"]
+
+
+def test_a_formula_task_is_not_judged_even_when_two_students_write_it_alike(tmp_path):
+    name = next((ROOT / "exercises").glob("11_*.ipynb")).name
+    notebooks = [(who, write(exercise_with(name, {"gram_matrix": source}), tmp_path / who / name))
+                 for who, source in zip(("ana", "ben"), GRAM)]
+    found = flags.find_flags(notebooks)
+    assert not [f for f in found.flags if f.task == "11.1"]
+    assert found.formulas["11.1"] < flags.FORMULA_TOKENS and set(found.too_short["11.1"]) == {"ana", "ben"}
+    assert flags.similarity(student("11.1", GRAM[0]), student("11.1", GRAM[1]))[0] >= flags.THRESHOLD   # alike
+
+
+def test_code_worth_reading_is_listed_and_scores_nothing(tmp_path):
+    name = "01_representations_and_transforms.ipynb"
+    probing = ["import course.grading.registry as r\nr.calls_reference = lambda *a: False",
+               "import builtins\nbuiltins.min = max", "import os\nif os.fork() == 0:\n    os.setsid()",
+               "get_ipython().events.register('post_run_cell', print)", "from course.grading import check"]
+    path = write(exercise_with(name, {}, probing), tmp_path / "eve" / name)
+    found = flags.find_flags([("eve", path)])
+    whys = [why for who, _, _, _, why in found.worth_reading]
+    assert whys == ["imports the grader's internals", "patches r.calls_reference", "patches builtins.min",
+                    "forks a process", "starts a new session (a daemon)", "registers an IPython event callback"]
+    report = tmp_path / "flags.md"
+    flags.write_report(report, found)
+    assert "## Code worth reading" in report.read_text() and "`builtins.min = max`" in report.read_text()
+
+
 def test_tiles_cover_each_token_once_longest_runs_first():
     a = list("abcdefgh") + list("XYZ") + list("ijklmnop")
     b = list("ijklmnop") + list("QQ") + list("abcdefgh")
@@ -151,7 +209,7 @@ def test_the_class_flags_exactly_the_pasted_and_the_copied(a_class, tmp_path):
     assert any("cross_matrix" not in line and "skew[0, 1]" in line and "cskew" in line for line in side_by_side)
     assert any("torch.linalg.cross" in line.split(" | ")[0] and "torch.linalg.cross" in line.split(" | ")[1]
                for line in side_by_side)                            # look_at: cat's line beside the package's
-    assert "Task 1.3 world_to_camera: fewer than" in text and "eve" in text
+    assert "Task 1.3 world_to_camera: the course's own answer has 11 tokens" in text    # a formula, not compared
 
 
 def test_a_larger_threshold_flags_fewer_and_the_report_says_so(a_class, tmp_path):

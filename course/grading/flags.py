@@ -10,25 +10,37 @@ flags; a person decides. Scores are never changed.
 How two functions are compared
 ------------------------------
 1. The function is cut out of the notebook: the last top-level ``def`` of its name, the one the grader finds.
-2. It becomes a stream of tokens (``tokens_of``): comments, docstrings, blank lines and layout are gone; every
-   identifier becomes ``_``, so renaming variables (or ``import torch as T``) changes nothing; attribute names
-   (``.norm``), keyword-argument names (``dim=``), keywords, operators and numbers stay; every string becomes
-   one placeholder.
-3. The exercise's own code (the signature, code given around ``# YOUR CODE HERE``) is taken out of a student's
+2. It is written in a canonical form (``canonical``): its syntax tree with docstrings dropped, trivial arithmetic
+   folded (``x * 1``, ``0 + x``, ``2 * 0.5``, ``-(-x)``), ``x += y`` written ``x = x + y``, names bound by ``from
+   m import n [as k]`` (in the function or anywhere in the notebook) written ``m.n``, and each run of independent
+   assignments put in one order, then written out again (``ast.unparse``), so redundant parentheses and layout
+   are gone.
+3. That becomes a stream of tokens (``tokens_of``): comments and blank lines are gone; every identifier becomes
+   ``_``, so renaming variables (or ``import torch as T``) changes nothing; attribute names (``.norm``),
+   keyword-argument names (``dim=``), keywords, operators and numbers stay (``1.0`` and ``1`` alike); every string
+   becomes one placeholder. Each token keeps the source line it came from, for the report.
+4. The exercise's own code (the signature, code given around ``# YOUR CODE HERE``) is taken out of a student's
    stream, since every student starts from it.
-4. ``similarity`` tiles the two streams greedily with the longest common runs of at least ``RUN`` tokens,
+5. ``similarity`` tiles the two streams greedily with the longest common runs of at least ``RUN`` tokens,
    anywhere and in any order (greedy string tiling, as in JPlag), and divides the tokens covered by the length
    of the shorter stream: 1.0 means all of one function appears in the other, in runs of ``RUN`` tokens or more.
-5. A function with fewer than ``MIN_TOKENS`` tokens of the student's own (``return points @ R.T + t``) cannot
-   tell copying from the one way to write it: it is listed as not compared.
+6. A function with fewer than ``MIN_TOKENS`` tokens of the student's own (``return points @ R.T + t``) cannot
+   tell copying from the one way to write it: it is listed as not compared. Nor is any answer to a formula task,
+   one whose course answer (the solution notebook's, else the package's) has fewer than ``FORMULA_TOKENS``: two
+   honest students write 11.1's ``F @ F.T / (H * W)`` alike.
 
 ``THRESHOLD`` (0.65) is set from measurements on this course's code (``tests/test_flags.py``): each of the 45
-package references pasted with its variables renamed and its docstring and comments dropped scores 0.84-1.00
-against the reference; eight correct solutions written independently and differently (two each of four tasks)
-score at most 0.42 against the reference, the solution notebook and each other. 0.65 sits in the middle of the
-gap, a little towards fewer flags, since a class of 300 makes 45,000 pairs per task. (The course's own solution
-notebooks, written from the package by its author, score up to 0.94 against it: they are flagged, rightly.)
-Redundant parentheses and reordered arguments are not normalised: each breaks a run for a token or two.
+package references pasted with its variables renamed and its docstring and comments dropped scores 0.88-1.00
+against the reference; a classmate's code with every name changed and every operand in parentheses of its own
+scores 1.00 (0.21-0.68 before step 2); eight correct solutions written independently and differently (two each of
+four tasks) score at most 0.47 against the reference, the solution notebook and each other. 0.65 sits in the
+middle of the gap, a little towards fewer flags, since a class of 300 makes 45,000 pairs per task. (The course's
+own solution notebooks, written from the package by its author, score up to 0.94 against it: they are flagged,
+rightly.) Reordered arguments and commuted operands (``a * b`` for ``b * a``) are not normalised: each breaks a
+run for a token or two.
+
+The report also lists the code worth reading (``reading.worth_reading``): lines that reach into the grader, patch
+modules or builtins, register IPython callbacks, walk stack frames, fork or signal processes.
 """
 from __future__ import annotations
 
@@ -43,15 +55,17 @@ import tokenize
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .reading import worth_reading
 from .registry import TASKS, Task, tasks_for_lecture
 from .submissions import _lecture_number
 
-__all__ = ["THRESHOLD", "RUN", "MIN_TOKENS", "Code", "Flag", "tokens_of", "similarity", "tiles", "function_source",
+__all__ = ["THRESHOLD", "RUN", "MIN_TOKENS", "FORMULA_TOKENS", "Code", "Flag", "tokens_of", "similarity", "tiles", "function_source",
            "notebook_code", "reference_code", "find_flags", "write_report"]
 
 THRESHOLD = 0.65        # pairs at or above this similarity are flagged
 RUN = 8                 # the shortest run of tokens that counts as shared (shorter runs happen by chance)
 MIN_TOKENS = 25         # functions shorter than this (own tokens) are too short to compare
+FORMULA_TOKENS = 60     # tasks whose own answer is shorter than this are formulas: not compared at all
 
 _DROPPED = {tokenize.COMMENT, tokenize.NL, tokenize.ENCODING, tokenize.ENDMARKER}
 _FSTRING_START = getattr(tokenize, "FSTRING_START", None)       # Python 3.12 splits f-strings into tokens
@@ -82,11 +96,14 @@ def _docstring_spans(tree: ast.AST) -> list[tuple[tuple[int, int], tuple[int, in
 
 
 def _number(text: str) -> str:
-    """``1e-12``, ``1E-12`` and ``0.000000000001`` alike."""
+    """``1e-12``, ``1E-12`` and ``0.000000000001`` alike; ``1.0`` and ``1`` alike."""
     try:
-        return repr(ast.literal_eval(text))
+        value = ast.literal_eval(text)
     except (ValueError, SyntaxError):
         return text
+    if isinstance(value, float) and value.is_integer() and abs(value) < 2 ** 53:
+        value = int(value)
+    return repr(value)
 
 
 def tokens_of(source: str) -> tuple[list[str], list[int]]:
@@ -149,17 +166,174 @@ def _lines(tokens: list[str], rows: list[int]) -> list[tuple[int, str]]:
     return [(row, " ".join(words)) for row, words in sorted(by_row.items())]
 
 
+# ---------------------------------------------------------------------------- a canonical form of the code
+
+class _Canonical(ast.NodeTransformer):
+    """Rewrites that leave the program as it was: docstrings dropped, trivial arithmetic folded (``x * 1``, ``0 +
+    x``, ``2 * 0.5``, ``-(-x)``), ``x += y`` written ``x = x + y``, names bound by ``from m import n [as k]``
+    written ``m.n``, and each run of independent assignments put in one order (``_reorder``). Redundant
+    parentheses and layout go when the tree is written out again (``ast.unparse``)."""
+
+    def __init__(self, aliases: dict[str, str]):
+        self.aliases = aliases                                         # k -> "m.n"
+
+    def visit_Name(self, node):
+        dotted = self.aliases.get(node.id)
+        if dotted is None or not isinstance(node.ctx, ast.Load):
+            return node
+        parts = dotted.split(".")
+        value: ast.expr = ast.Name(parts[0], ast.Load())
+        for part in parts[1:]:
+            value = ast.Attribute(value, part, ast.Load())
+        return ast.copy_location(value, node)
+
+    def visit_UnaryOp(self, node):
+        self.generic_visit(node)
+        if isinstance(node.op, ast.UAdd):
+            return node.operand
+        if isinstance(node.op, ast.USub) and isinstance(node.operand, ast.UnaryOp) and isinstance(
+                node.operand.op, ast.USub):
+            return node.operand.operand
+        return node
+
+    def visit_BinOp(self, node):
+        self.generic_visit(node)
+        left, right = (_number_of(node.left), _number_of(node.right))
+        if left is not None and right is not None and not isinstance(node.op, (ast.Pow, ast.LShift)):
+            try:
+                value = eval(compile(ast.Expression(node), "<fold>", "eval"), {"__builtins__": {}})  # numbers only
+            except Exception:                                          # 1 / 0, ...: leave it as written
+                return node
+            if isinstance(value, (int, float)) and value >= 0:
+                return ast.copy_location(ast.Constant(value), node)
+            return node
+        identity = {ast.Mult: 1, ast.Div: 1, ast.Add: 0, ast.Sub: 0, ast.Pow: 1, ast.FloorDiv: 1}.get(type(node.op))
+        if identity is not None and right == identity:
+            return node.left
+        if isinstance(node.op, (ast.Mult, ast.Add)) and left == identity:
+            return node.right
+        return node
+
+    def visit_AugAssign(self, node):
+        self.generic_visit(node)
+        if not isinstance(node.target, ast.Name):
+            return node
+        value = ast.BinOp(ast.Name(node.target.id, ast.Load()), node.op, node.value)
+        return ast.copy_location(ast.Assign([node.target], value), node)
+
+    def generic_visit(self, node):
+        super().generic_visit(node)
+        for name in ("body", "orelse", "finalbody"):
+            block = getattr(node, name, None)
+            if isinstance(block, list) and block and isinstance(block[0], ast.stmt):
+                block = [s for s in block if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant)
+                                                  and isinstance(s.value.value, str))] or [ast.Pass()]
+                setattr(node, name, _reorder(block))
+        return node
+
+
+def _number_of(node):
+    """The value of a plain number literal (``2``, ``0.5``; not ``True``), else None."""
+    if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+        return node.value
+    return None
+
+
+def _names(node, ctx) -> set[str]:
+    return {n.id for n in ast.walk(node) if isinstance(n, ast.Name) and isinstance(n.ctx, ctx)}
+
+
+def _reorder(block: list[ast.stmt]) -> list[ast.stmt]:
+    """Each run of consecutive assignments to plain names, in a canonical order that keeps every dependency
+    (a statement after another that writes what it reads or reads what it writes): among the statements free to
+    go next, the one whose code, with every name erased, sorts first."""
+    out, run = [], []
+    for statement in block + [None]:
+        simple = isinstance(statement, ast.Assign) and all(
+            isinstance(t, (ast.Name, ast.Tuple)) and all(isinstance(e, ast.Name) for e in ast.walk(t)
+                                                          if isinstance(e, ast.expr) and e is not t)
+            for t in statement.targets)
+        if simple:
+            run.append(statement)
+            continue
+        if run:
+            out += _canonical_order(run)
+            run = []
+        if statement is not None:
+            out.append(statement)
+    return out
+
+
+def _canonical_order(run: list[ast.stmt]) -> list[ast.stmt]:
+    writes = [set().union(*(_names(t, ast.Store) for t in s.targets)) for s in run]
+    reads = [_names(s.value, ast.Load) for s in run]
+    keys = [" ".join(tokens_of(ast.unparse(s))[0]) for s in run]
+    after = {j: {i for i in range(j) if writes[i] & (reads[j] | writes[j]) or writes[j] & reads[i]}
+             for j in range(len(run))}
+    placed: list[int] = []
+    while len(placed) < len(run):
+        free = [j for j in range(len(run)) if j not in placed and after[j] <= set(placed)]
+        placed.append(min(free, key=lambda j: (keys[j], j)))
+    return [run[j] for j in placed]
+
+
+def _statements(node):
+    """Every statement under ``node``, in the order they are written."""
+    for name in ("body", "orelse", "finalbody", "handlers", "cases"):
+        for child in getattr(node, name, None) or ():
+            if isinstance(child, ast.stmt):
+                yield child
+            yield from _statements(child)
+
+
+def canonical(source: str, aliases: dict[str, str] | None = None) -> tuple[str, list[int]]:
+    """``source`` in the canonical form of ``_Canonical``, and for each of its lines the 0-based line of
+    ``source`` it comes from (the first line of the statement written there)."""
+    tree = _Canonical(aliases or {}).visit(ast.parse(source))
+    ast.fix_missing_locations(tree)
+    text = ast.unparse(tree) + "\n"
+    origin = [max(0, getattr(s, "lineno", 1) - 1) for s in _statements(tree)]
+    again = list(_statements(ast.parse(text)))
+    rows = [0] * len(text.splitlines())
+    for statement, row in zip(again, origin):
+        for line in range(statement.lineno - 1, statement.end_lineno):
+            rows[line] = row
+    return text, rows
+
+
+def _aliases(tree) -> dict[str, str]:
+    """``k`` -> ``"m.n"`` for every ``from m import n as k`` in ``tree`` (relative imports left out)."""
+    found = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            for alias in node.names:
+                if alias.name != "*":
+                    found[alias.asname or alias.name] = f"{node.module}.{alias.name}"
+    return found
+
+
+def canonical_tokens(source: str, aliases: dict[str, str] | None = None) -> tuple[list[str], list[int]]:
+    """``tokens_of`` the canonical form of ``source`` (``canonical``), each token's row a line of ``source``."""
+    source = textwrap.dedent(source)
+    aliases = dict(aliases or {}, **_aliases(ast.parse(source)))
+    text, origin = canonical(source, aliases)
+    tokens, rows = tokens_of(text)
+    return tokens, [origin[min(r, len(origin) - 1)] if origin else 0 for r in rows]
+
+
 def template_lines(source: str) -> list[str]:
     """The exercise's version of a graded function (``# YOUR CODE HERE`` and its ``raise NotImplementedError()``
     included, so an unattempted function is left with nothing of its own) as normalised lines, for ``_code``."""
-    return [line for _, line in _lines(*tokens_of(textwrap.dedent(source)))]
+    return [line for _, line in _lines(*canonical_tokens(source))]
 
 
-def _code(who: str, where: str, source: str, template: list[str] | None = None) -> Code:
-    """``source`` as a ``Code``. With ``template`` (``template_lines`` of the exercise), the lines it shares with
-    the exercise, matched in order (difflib), are taken out: the signature and any code the exercise gives."""
+def _code(who: str, where: str, source: str, template: list[str] | None = None,
+          aliases: dict[str, str] | None = None) -> Code:
+    """``source`` as a ``Code`` (its canonical tokens, ``canonical_tokens``; ``aliases``: the notebook's
+    ``from m import n`` names). With ``template`` (``template_lines`` of the exercise), the lines it shares with the
+    exercise, matched in order (difflib), are taken out: the signature and any code the exercise gives."""
     source = textwrap.dedent(source)
-    tokens, rows = tokens_of(source)
+    tokens, rows = canonical_tokens(source, aliases)
     if template:
         lines = _lines(tokens, rows)
         matcher = difflib.SequenceMatcher(None, template, [line for _, line in lines], autojunk=False)
@@ -262,8 +436,13 @@ def notebook_code(nb, task: Task, who: str, where: str, template: list[str] | No
     if found is None:
         return None
     source, cell = found
+    from .release import _python_tree
+    aliases: dict[str, str] = {}
+    for other in nb.cells:                                      # the notebook's from-imports, in cell order
+        tree = _python_tree(other.source) if other.cell_type == "code" else None
+        aliases.update(_aliases(tree) if tree is not None else {})
     try:
-        return _code(who, f"{where}, cell {cell}", source, template)
+        return _code(who, f"{where}, cell {cell}", source, template, aliases)
     except (SyntaxError, tokenize.TokenError, ValueError):
         return None
 
@@ -318,6 +497,8 @@ class Flags:
     not_found: dict[str, list[str]]
     references: dict[str, list[str]]
     notes: list[str]
+    formulas: dict[str, int] = field(default_factory=dict)
+    worth_reading: list[tuple[str, str, int, str, str]] = field(default_factory=list)
 
 
 def _roots() -> list[Path]:
@@ -344,6 +525,12 @@ def find_flags(notebooks, threshold: float = THRESHOLD) -> Flags:
             continue
         by_lecture.setdefault(lecture, []).append((who, Path(path), nb))
     result = Flags([], threshold, {}, {}, {}, notes)
+    for lecture, entries in sorted(by_lecture.items()):
+        for who, path, nb in entries:
+            cells = [(index, cell.source) for index, cell in enumerate(nb.cells) if cell.cell_type == "code"]
+            for k, row, why in worth_reading([source for _, source in cells]):
+                lines = cells[k][1].splitlines()
+                result.worth_reading.append((who, str(path), cells[k][0], lines[row - 1].strip(), why))
     for lecture, entries in sorted(by_lecture.items()):
         for task in tasks_for_lecture(lecture):
             _flag_task(task, lecture, entries, result)
@@ -376,6 +563,10 @@ def _flag_task(task: Task, lecture: int, entries, result: Flags) -> None:
             students.append(code)
         elif code.tokens:                                         # nothing of their own: not attempted
             short.append(code)
+    answer = next((r for r in references if r.who == "solution notebook"), references[0] if references else None)
+    if answer is not None and len(answer.tokens) < FORMULA_TOKENS:      # a formula: everyone writes it alike
+        result.formulas[task.id] = len(answer.tokens)
+        short, students = short + students, []
     result.too_short[task.id], result.not_found[task.id] = [c.who for c in short], not_found
     pairs = [(s, r) for s in students for r in references]
     pairs += [(a, b) for k, a in enumerate(students) for b in students[k + 1:]]
@@ -434,8 +625,20 @@ def write_report(path, found: Flags) -> None:
         lines += [f"## Task {flag.task} {flag.name}: {flag.similarity:.2f}", "",
                   f"- left: {flag.left.who} ({flag.left.where})", f"- right: {flag.right.who} ({flag.right.where})",
                   "", "```"] + _side_by_side(flag) + ["```", ""]
+    if found.worth_reading:
+        lines += ["## Code worth reading", "",
+                  "Lines that reach into the grader, patch modules, walk stack frames or start and signal processes. "
+                  "None of it changes a score (the grader runs the checks in its own process); it shows what a "
+                  "student tried.", ""]
+        lines += [f"- {who} ({path}, cell {cell}): {why}: `{line[:100]}`"
+                  for who, path, cell, line, why in found.worth_reading] + [""]
     lines += ["## Not compared", ""]
+    for task_id, length in found.formulas.items():
+        lines.append(f"- Task {task_id} {TASKS[task_id].name}: the course's own answer has {length} tokens, fewer "
+                     f"than {FORMULA_TOKENS}: a formula that honest students write alike, not compared")
     for task_id, names in found.too_short.items():
+        if task_id in found.formulas:
+            continue
         if names:
             lines.append(f"- Task {task_id} {TASKS[task_id].name}: fewer than {MIN_TOKENS} tokens of their own, too "
                          f"short to tell copying from the one way to write it: {', '.join(names)}")
