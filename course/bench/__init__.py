@@ -32,6 +32,8 @@
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
 * ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
   retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
+* ``grading`` (``course.bench.grading``): one Gradescope submission graded end to end (``run_autograder`` on a
+  lecture's solution), the notebook's code as this user or, as root, as a user of its own.
 
 A benchmark module holds its ``DESCRIPTION``, ``add_arguments(parser)`` (its own options), ``run(args)`` and
 optionally ``REPEAT`` (its default number of timed runs, 7 otherwise),
@@ -48,7 +50,7 @@ import os
 
 import torch
 
-from . import (aa, explorers, fit, gradients, kernels, learn, precision, raster, raytrace, shadow_art,
+from . import (aa, explorers, fit, gradients, grading, kernels, learn, precision, raster, raytrace, shadow_art,
                shadow_gradients, shadows, skips, soft, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
@@ -60,7 +62,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
-           "explorers": explorers, "learn": learn}
+           "explorers": explorers, "learn": learn, "grading": grading}
 
 
 def cli(argv) -> int:
