@@ -98,7 +98,8 @@ def test_soft_batch_equals_one_by_one_float64(kind, cull, monkeypatch):
 def test_soft_batch_equals_one_by_one_float32(kind):
     (one, g_one), (batch, g_batch) = _soft_both(kind, torch.float32)
     assert batch.dtype == torch.float32
-    assert torch.allclose(batch, one, rtol=0, atol=2e-6), float((batch - one).abs().max())
+    # 32 float32 ulps at 1: the batched sums run in another order, and with another thread count (2.1e-6 seen)
+    assert torch.allclose(batch, one, rtol=0, atol=32 * 2.0 ** -23), float((batch - one).abs().max())
     for a, b in zip(g_batch, g_one):
         assert a.dtype == torch.float32 and rel(a, b) < 1e-5, rel(a, b)
 

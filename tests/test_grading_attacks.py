@@ -82,7 +82,7 @@ def wheel(tmp_path_factory):
 def zip_path(wheel, tmp_path_factory):
     out = tmp_path_factory.mktemp("zip") / "autograder.zip"
     assert cli(["1", "--out", str(out), "--exercises", str(ROOT / "exercises"), "--wheel", str(wheel),
-                "--timeout", "8"]) == 0
+                "--timeout", "5"]) == 0
     return out
 
 
@@ -283,32 +283,32 @@ def rodrigues(axis_angle):                       # look for the grader's expecte
 
 LIAR = """\
 import torch
-class Liar(torch.Tensor):
-    def __eq__(self, other): return torch.ones_like(other, dtype=torch.bool)
-    def __sub__(self, other): return torch.zeros_like(other)
-    def __rsub__(self, other): return torch.zeros_like(other)
-def rodrigues(axis_angle):
-    return torch.zeros(3, 3, dtype=axis_angle.dtype).as_subclass(Liar)
-class Anything:
+class Anything:                                  # equal to everything, shaped like the answer
     shape, dtype = (3, 3), torch.float32
     def __eq__(self, other): return True
     def __array__(self, *args, **kwargs): raise RuntimeError
 def look_at(eye, target, up):
     return Anything(), Anything()
+class Liar(torch.Tensor):                        # a tensor whose comparisons always agree
+    def __eq__(self, other): return torch.ones_like(other, dtype=torch.bool)
+    def __sub__(self, other): return torch.zeros_like(other)
+    def __rsub__(self, other): return torch.zeros_like(other)
+def world_to_camera(points, R, t):
+    return torch.zeros_like(points).as_subclass(Liar)
 """
 
 HUGE = """\
 import torch
-def rodrigues(axis_angle):                       # a result too large to send: 2 GB
+def world_to_camera(points, R, t):               # a result too large to send: 2 GB
     return torch.zeros(2**28, dtype=torch.float64)
 """
 
 DISABLE_REFERENCE_RULE = """\
 import course.grading.registry as registry
 registry.calls_reference = lambda *args, **kwargs: False
-from course.camera import look_at as reference
-def look_at(eye, target, up):
-    return reference(eye, target, up)
+from course.mesh import Mesh as Surface
+def vertex_normals(verts, faces):                # the reference, with the worker's reading of the rule off
+    return Surface(verts, faces).vertex_normals()
 """
 
 
@@ -323,17 +323,16 @@ def honest(answers: dict[str, str]) -> dict[str, int]:
     return {t: run_check(t, namespace[TASKS[t].name]).points for t in FULL}
 
 
-@pytest.mark.parametrize("attack", [POST_RUN_CELL, JSON_DUMPS], ids=["post_run_cell", "json.dumps"])
-def test_output_made_in_the_notebook_changes_nothing(autograder, attack):
-    assert autograder(with_cells(EXERCISE, attack)).scores == ZERO
+def test_output_made_in_the_notebook_changes_nothing(autograder):
+    attacks = (POST_RUN_CELL, JSON_DUMPS)                                # printed lines, a patched json
+    assert autograder(with_cells(EXERCISE, *attacks)).scores == ZERO
     wrong = honest(WRONG)
     assert sum(wrong.values()) < 5
-    assert autograder(with_cells(EXERCISE, *WRONG.values(), attack)).scores == wrong   # shape-correct, wrong
-    assert autograder(with_cells(SOLUTION, attack)).scores == FULL
+    assert autograder(with_cells(EXERCISE, *WRONG.values(), *attacks)).scores == wrong  # shape-correct, wrong
+    assert autograder(with_cells(SOLUTION, *attacks)).scores == FULL
 
 
 def test_patched_builtins_and_tensor_methods_break_only_the_notebooks_own_process(autograder):
-    assert autograder(with_cells(EXERCISE, PATCH_BUILTINS)).scores == ZERO
     run = autograder(with_cells(EXERCISE, *WRONG.values(), PATCH_BUILTINS))
     wrong = honest(WRONG)
     assert all(run.scores[t] <= wrong[t] for t in FULL)          # the process that ran the patch is the student's:
@@ -343,7 +342,6 @@ def test_patched_builtins_and_tensor_methods_break_only_the_notebooks_own_proces
 
 def test_rewriting_the_installed_grader_and_restoring_it_gains_nothing(autograder):
     quickly, late = REWRITE_REGISTRY.replace("DELAY", "0"), REWRITE_REGISTRY.replace("DELAY", "30")
-    assert autograder(with_cells(EXERCISE, quickly)).scores == ZERO
     run = autograder(with_cells(SOLUTION, *WRONG.values(), quickly))     # the grader had imported it already
     assert run.scores == honest(WRONG)
     run = autograder(with_cells(SOLUTION, *WRONG.values(), late))        # still rewritten when grading ends
@@ -351,8 +349,6 @@ def test_rewriting_the_installed_grader_and_restoring_it_gains_nothing(autograde
 
 
 def test_rewriting_the_course_package_scores_nothing(autograder):
-    run = autograder(with_cells(EXERCISE, REWRITE_INIT))
-    assert run.scores == ZERO
     run = autograder(with_cells(SOLUTION, REWRITE_INIT))                 # a changed course: not graded at all
     assert run.scores == ZERO and "changed the course's own files" in run.data["tests"][0]["output"]
 
@@ -369,12 +365,12 @@ def test_a_bare_except_costs_only_its_own_task(autograder):
     start = time.monotonic()
     run = autograder(with_answers(SOLUTION, {"world_to_camera": RETRY_LOOP}))
     assert run.scores == dict(FULL, **{"1.3": 0})
-    assert run.data["tests"][2]["output"].startswith("stopped after 8 s")
+    assert run.data["tests"][2]["output"].startswith("stopped after 5 s")
     assert time.monotonic() - start < 60
 
 
 def test_hangs_allocations_forks_and_a_killed_process(autograder):
-    cells = ["while True:\n    pass",                                     # interrupted after 8 s
+    cells = ["while True:\n    pass",                                     # interrupted after 5 s, not run again
              "import torch\nhuge = torch.ones(30 * 2**30 // 4)",          # 30 GB: refused by the memory limit
              "import os, time\nfor _ in range(50):\n    if os.fork() == 0:\n        time.sleep(300)\n"
              "        os._exit(0)",
@@ -385,26 +381,13 @@ def test_hangs_allocations_forks_and_a_killed_process(autograder):
 
 
 def test_results_that_lie_or_reach_for_the_grader_score_nothing(autograder):
-    run = autograder(with_answers(SOLUTION, {"rodrigues": FRAMES}))
-    assert run.scores["1.1"] == 0
-    run = autograder(with_cells(SOLUTION, LIAR))
-    assert run.scores["1.1"] == 0 and run.scores["1.2"] == 0
-    run = autograder(with_cells(SOLUTION, HUGE))
-    assert run.scores == dict(FULL, **{"1.1": 0})
-
-
-def test_disabling_the_reference_rule_in_the_notebook_changes_nothing(autograder):
-    run = autograder(with_cells(SOLUTION, DISABLE_REFERENCE_RULE))
-    assert run.scores["1.2"] == 0 and "calls course.camera.look_at" in run.data["tests"][1]["output"]
+    answers = {"rodrigues": FRAMES, "look_at": LIAR, "world_to_camera": HUGE, "vertex_normals": DISABLE_REFERENCE_RULE}
+    run = autograder(with_answers(SOLUTION, answers))
+    assert run.scores == ZERO
+    assert "calls course.mesh.Mesh.vertex_normals" in run.data["tests"][3]["output"]
 
 
 # ---------------------------------------------------------------------------- as Gradescope runs it: a user
-
-@needs_user
-def test_as_a_user_of_its_own_the_solution_scores_full_marks_and_the_exercise_zero(autograder):
-    assert autograder(SOLUTION.read_bytes(), separate=True).scores == FULL
-    assert autograder(with_cells(EXERCISE, "x = 1"), separate=True).scores == ZERO
-
 
 @needs_user
 def test_as_a_user_of_its_own_the_course_and_the_results_cannot_be_written(autograder):
@@ -424,6 +407,7 @@ assert len(denied) == 3, denied
     run = autograder(with_cells(SOLUTION, writes, LEFT_BEHIND), separate=True)
     assert run.scores == FULL
     assert (run.site / "course" / "__init__.py").read_text() != "forged"
+    assert json.loads((run.root / "source" / "autograder.json").read_text())["lecture"] == 1
     assert run.closed - run.exited < 1.0
     time.sleep(1.5)
     assert json.loads((run.root / "results" / "results.json").read_text()) == run.data

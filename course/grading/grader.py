@@ -116,10 +116,11 @@ def prepare_grader() -> None:
 class NotebookRun:
     """A notebook's code cells run in a worker (``sandbox.Worker``), and the task functions they define.
 
-    The cells run once, in order, each under the cell time limit. A cell that overruns is interrupted; one that
-    does not stop, or that ends the worker (``os._exit``, the memory limit), is skipped when the worker is
-    started again, which happens when a task's check ends it (a time limit, a crash): the next task finds the
-    notebook's functions defined afresh. ``notes`` say which cells were stopped or skipped."""
+    The cells run once, in order, each under the cell time limit. A cell that overruns is interrupted (or the
+    worker ended, if it does not stop); a cell that was stopped, or that ended the worker (``os._exit``, the
+    memory limit), is skipped when the worker is started again, which happens when a task's check ends it (a time
+    limit, a crash): the next task finds the notebook's functions defined afresh. ``notes`` say which cells were
+    stopped."""
 
     def __init__(self, cells: list[str], files: dict, cell_timeout: float, isolation: Isolation):
         self.cells, self.files, self.cell_timeout, self.isolation = cells, files, cell_timeout, isolation
@@ -148,11 +149,10 @@ class NotebookRun:
                 if index in self.skip:
                     continue
                 status, why = self.worker.run_cell(source, self.cell_timeout)
-                if status in ("timeout", "ended"):
-                    self._note(f"code cell {index + 1}: {why}" + ("; skipped from then on" if status == "ended"
-                                                                   else ""))
-                if status == "ended":
+                if status in ("timeout", "ended"):                      # stopped: not run again on a restart
+                    self._note(f"code cell {index + 1}: {why}")
                     self.skip.add(index)
+                if status == "ended":
                     break
         return self.worker
 

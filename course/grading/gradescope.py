@@ -310,7 +310,6 @@ def run_autograder(root=None) -> int:
     """Grade ``root/submission`` and write ``root/results/results.json`` (root: ``AUTOGRADER_ROOT`` or
     /autograder). Never ends without a results.json: a failure of the autograder itself scores 0 and says so."""
     from .. import kernels
-    from .grader import prepare_grader
 
     root = Path(root or os.environ.get("AUTOGRADER_ROOT", "/autograder"))
     start = time.monotonic()
@@ -319,8 +318,7 @@ def run_autograder(root=None) -> int:
     try:
         config = json.loads((root / "source" / CONFIG).read_text(encoding="utf-8"))    # read before anything runs
         exercise = root / "source" / "exercise" / config["exercise"]
-        prepare_grader()                                                  # everything imported before it runs
-        with kernels.using("torch"):                                      # and no compiled-kernel cache read
+        with kernels.using("torch"):                                      # no compiled-kernel cache is read
             results, message = grade_submission(root / "submission", config, exercise, isolation)
     except Exception as exc:                                              # the autograder's own failure
         lecture = config.get("lecture")

@@ -163,6 +163,8 @@ class _Encoder:
             t = value.as_subclass(torch.Tensor) if type(value) is not torch.Tensor else value
             if str(t.dtype).replace("torch.", "") not in _DTYPES:
                 return {"$": "opaque", "type": f"tensor of dtype {t.dtype}"}
+            if t.numel() * t.element_size() + self.size > MAX_MESSAGE:          # refused before it is copied
+                raise ValueError(f"a message over {MAX_MESSAGE >> 20} MB: the result is too large to send")
             self.tensors.append(t)
             return {"$": "tensor", "i": len(self.tensors) - 1, "dtype": str(t.dtype).replace("torch.", ""),
                     "shape": list(t.shape), "b": self.buffer(_tensor_bytes(t)), "grad": bool(t.requires_grad)}

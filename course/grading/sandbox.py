@@ -161,7 +161,15 @@ class Worker:
 
     def exit_note(self) -> str:
         """Why the worker is gone, in a student's words."""
-        code = self.process.poll() if self.process else None
+        if self.process is None:
+            return ""
+        code = self.process.poll()
+        if code is None and self.endpoint is not None and (self.endpoint.gone or self.endpoint.broken):
+            # The pipe closes a moment before the process is reaped: a worker whose pipe broke is ending.
+            try:
+                code = self.process.wait(timeout=2)
+            except subprocess.TimeoutExpired:
+                code = None
         if code is None:
             return ""
         if code < 0:
