@@ -18,15 +18,36 @@ def test_standard_scenes_are_the_documented_ones():
     assert (cam.width, cam.height) == (1024, 1024) and torch.allclose(cam.eye, torch.tensor([0.0, 0.0, 3.0]))
 
 
-def test_bench_raster_reports_rows(capsys):
+@pytest.fixture
+def no_cold_start(monkeypatch):
+    """The raster and ray-tracing benchmarks end with the kernels' cold start, which compiles every kernel in a
+    fresh process (15-20 s): measured once, for one kernel, in ``test_cold_start_compiles_then_loads``."""
+    lines = []
+    for module in ("raster", "raytrace"):
+        monkeypatch.setattr(f"course.bench.{module}.cold_start_line", lambda out=print: lines.append(out) or None)
+    return lines
+
+
+def test_cold_start_compiles_then_loads():
+    from course import kernels
+    from course.bench.kernels import cold_start
+    if not kernels.available():
+        pytest.skip("Numba is not installed")
+    times = cold_start(only=["screen"])
+    assert set(times["compile"]) == set(times["load"]) == {"import_s", "screen"}
+    assert times["load"]["screen"] < times["compile"]["screen"]          # a cache hit beats compiling
+
+
+def test_bench_raster_reports_rows(capsys, no_cold_start):
     rows = bench_raster(["S4"], repeat=1, memory=False)
+    assert len(no_cold_start) == 1                                        # it ends with the cold-start line
     assert [(r["scene"], r["cull"]) for r in rows] == [("S4", False), ("S4", True)]
     assert all(r["ms"] > 0 and r["mtri_s"] > 0 for r in rows)
     assert "S4" in capsys.readouterr().out
     assert "OpenGL" not in format_table(rows)
 
 
-def test_bench_command_runs_a_benchmark_with_its_own_options(tmp_path, capsys):
+def test_bench_command_runs_a_benchmark_with_its_own_options(tmp_path, capsys, no_cold_start):
     from course.bench import BENCHES, cli
     out = tmp_path / "rows.json"
     assert cli(["raster", "--scenes", "S4", "--repeat", "1", "--no-memory", "--json", str(out)]) == 0
@@ -129,7 +150,7 @@ def test_bench_raytrace_tiny_scene_agrees_with_brute_force(capsys):
     assert "incoherent" in format_table(rows)
 
 
-def test_bench_raytrace_thin_scene_and_skip_message(capsys, monkeypatch):
+def test_bench_raytrace_thin_scene_and_skip_message(capsys, monkeypatch, no_cold_start):
     from course.bench import raytrace
     mesh, cam = raytrace.thin_scene(n_thin=50, n_flat=4, size=16)
     assert mesh.num_faces == 54

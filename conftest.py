@@ -1,0 +1,84 @@
+"""How the whole suite runs: on every core, each notebook kept whole, and where the time went.
+
+``pytest`` (pyproject's addopts) runs on up to four worker processes (pytest-xdist):
+
+* a notebook's cells share one kernel and run in order, so nbval's items of one notebook form one unit of work,
+  which one worker runs from start to end; every other test is handed out on its own
+  (``pytest_xdist_make_scheduler``);
+* a worker's own torch runs on one thread (the workers are the parallelism; notebook kernels and the
+  reproducibility pass keep their own settings), and every process started from here lets idle OpenMP threads
+  sleep (``OMP_WAIT_POLICY=PASSIVE``): spinning threads of two kernels on two cores cost lecture 09 61 s instead
+  of 22 s when it shared the machine with lecture 13;
+* the compiled kernels are warmed once, before the workers start, so that neither they nor the notebook
+  kernels compile the same kernel at the same time;
+* the summary ends with each notebook's time (its cells under nbval, and its second run as another CPU), so
+  that growth shows (README, "Run every test").
+
+Results do not depend on the split: no test reads another's output, and every notebook is one group.
+"""
+import os
+import subprocess
+import sys
+from collections import defaultdict
+
+import pytest
+
+
+def _is_worker(config) -> bool:
+    return hasattr(config, "workerinput")
+
+
+def pytest_configure(config):
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")   # idle OpenMP threads sleep: workers and kernels share cores
+    if config.pluginmanager.hasplugin("xdist"):
+        config.pluginmanager.register(_Scheduler(), "course-notebook-scheduler")
+    if _is_worker(config):
+        import torch
+        torch.set_num_threads(1)
+    elif not getattr(config.option, "collectonly", False):
+        subprocess.run([sys.executable, "-c", "from course import kernels\nif kernels.available(): "
+                        "kernels.warm_up()"], capture_output=True, env=dict(os.environ))
+
+
+class _Scheduler:
+    """Work units: a whole notebook (nbval's cells share one kernel), or one test. Units with the most tests
+    (the notebooks) are handed out first (xdist's loadscope ordering), so a long notebook never starts last."""
+
+    @staticmethod
+    def pytest_xdist_make_scheduler(config, log):
+        from xdist.scheduler import LoadScopeScheduling
+
+        class NotebookScheduling(LoadScopeScheduling):
+            def _split_scope(self, nodeid):
+                path = nodeid.split("::")[0]
+                return path if path.endswith(".ipynb") else nodeid
+        return NotebookScheduling(config, log)
+
+
+_NOTEBOOK_TIMES = defaultdict(float)
+
+
+def pytest_runtest_logreport(report):
+    """Add up each notebook's time: its nbval cells, and its reproducibility run."""
+    path = report.nodeid.split("::")[0]
+    if path.endswith(".ipynb"):
+        _NOTEBOOK_TIMES[(path, "nbval")] += report.duration
+    elif "test_outputs_are_the_same_with_other_vector_code_and_one_thread[" in report.nodeid and report.when == "call":
+        name = report.nodeid.split("[", 1)[1].rstrip("]")
+        _NOTEBOOK_TIMES[(f"{name}.ipynb", "as another CPU")] += report.duration
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_terminal_summary(terminalreporter):
+    if not _NOTEBOOK_TIMES:
+        return
+    rows = defaultdict(dict)
+    for (path, run), seconds in _NOTEBOOK_TIMES.items():
+        rows[path][run] = seconds
+    terminalreporter.section("notebook times (seconds)")
+    terminalreporter.write_line(f"{'notebook':54s} {'nbval':>7s} {'as another CPU':>15s}")
+    for path in sorted(rows, key=lambda p: -sum(rows[p].values())):
+        times = rows[path]
+        terminalreporter.write_line(f"{path:54s} {times.get('nbval', 0):7.1f} {times.get('as another CPU', 0):15.1f}")
+    terminalreporter.write_line(f"{'all':54s} {sum(t.get('nbval', 0) for t in rows.values()):7.1f} "
+                                f"{sum(t.get('as another CPU', 0) for t in rows.values()):15.1f}")
