@@ -32,6 +32,8 @@
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
 * ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
   retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
+* ``lectures`` (``course.bench.lectures``): each lecture's Run All in a fresh kernel, its seconds and its three
+  slowest cells, against a budget of 60 s a lecture.
 * ``grading`` (``course.bench.grading``): one Gradescope submission graded end to end (``run_autograder`` on a
   lecture's solution), the notebook's code as this user or, as root, as a user of its own.
 
@@ -50,8 +52,8 @@ import os
 
 import torch
 
-from . import (aa, explorers, fit, gradients, grading, kernels, learn, precision, raster, raytrace, shadow_art,
-               shadow_gradients, shadows, skips, soft, style)
+from . import (aa, explorers, fit, gradients, grading, kernels, learn, lectures, precision, raster, raytrace,
+               shadow_art, shadow_gradients, shadows, skips, soft, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -62,7 +64,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
-           "explorers": explorers, "learn": learn, "grading": grading}
+           "explorers": explorers, "learn": learn, "grading": grading, "lectures": lectures}
 
 
 def cli(argv) -> int:
