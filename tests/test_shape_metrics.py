@@ -33,6 +33,27 @@ def test_chamfer_of_concentric_and_offset_spheres():
     assert abs(chamfer_distance(shifted, a) / want - 1) < 0.03
 
 
+def test_the_grid_search_finds_exactly_the_brute_forces_nearest_samples():
+    """Surfaces near each other, far apart, crossing, of different sizes, and point sets with exact ties (a
+    lattice and its copy): the same indices (the first of equals) and distances as comparing every pair."""
+    from course.shape_metrics import _nearest, _nearest_brute
+    g = torch.Generator().manual_seed(3)
+    sphere, _ = sample_surface(models.icosphere(3, 1.0, dtype=torch.float64), 1500, g)
+    teapot, _ = sample_surface(models.teapot(3), 1500, g)
+    lattice = torch.stack(torch.meshgrid(*[torch.arange(8.0, dtype=torch.float64)] * 3, indexing="ij"), -1)
+    lattice = lattice.reshape(-1, 3)
+    cases = [(sphere, sphere * 1.01), (sphere, sphere + 5.0), (sphere, teapot), (teapot, sphere * 0.1),
+             (lattice, lattice.flip(0)), (lattice + 0.5, lattice), (sphere[:1], teapot), (teapot, sphere[:1])]
+    for x, y in cases:
+        index, dist = _nearest(x, y)
+        want_index, want_squared = _nearest_brute(x, y)
+        assert torch.equal(index, want_index) and torch.equal(dist, want_squared.sqrt())
+        d = x[:, None, :] - y[None, :, :]                                   # every pair, written out
+        squared = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+        first = torch.where(squared == squared.min(1, keepdim=True).values, torch.arange(y.shape[0]), y.shape[0])
+        assert torch.equal(want_index, first.min(1).values) and torch.equal(want_squared, squared.min(1).values)
+
+
 def test_a_cube_against_itself_and_a_crumpled_sphere():
     cube = models.cube(dtype=torch.float64)
     m = shape_metrics(cube, cube, samples=5000)
@@ -75,6 +96,10 @@ def test_the_preconditioned_gradient_is_a_dense_solve():
     (v * g).sum().backward()
     want = torch.linalg.solve(torch.eye(V, dtype=torch.float64) + 10.0 * L, g)
     assert float((p.u.grad - want).abs().max()) < 1e-12
+    u = p.u.detach().clone().requires_grad_(True)                   # the two triangular solves are potrs,
+    reference = torch.cholesky_solve(u, p.factor)[p.weld]          # bit for bit, both ways
+    (reference * g).sum().backward()
+    assert torch.equal(reference.detach(), v.detach()) and torch.equal(u.grad, p.u.grad)
     identity = Parameterization(mesh.verts, mesh.faces, lam=0.0)
     assert torch.equal(identity.u.detach(), mesh.verts)
     with pytest.raises(ValueError, match="lam"):
