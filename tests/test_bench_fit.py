@@ -76,6 +76,14 @@ def test_fast_mesh_views_and_texture_rows():
     assert lines[-1].startswith("| application")
 
 
+def test_fast_starts_rows():
+    rows = fb.bench_fit(["starts"], fast=True, out=lambda line: None)
+    check_rows(rows)
+    assert [r["method"] for r in rows[::2]] == list(fb.START_VARIANTS)
+    assert all(r["unit"] == "deg" and r["start"] >= 0 for r in rows[::2])
+    assert all(r["unit"] == "of 6" and 0 <= r["final"] <= 6 for r in rows[1::2])
+
+
 def test_fast_images_rows_and_picture(tmp_path):
     """The mesh from images: five fits, five metrics each, each fit's start its own (the hull, or the sphere);
     --figure writes the README's picture (two rows of three)."""

@@ -323,3 +323,21 @@ def test_sub_pixel_samples_match_torch(dtype):
                    dict(pixels=torch.rand(40, 48, generator=g) > 0.5)):
             a, b = both(lambda: rasterize(mesh, cam, cull_backfaces=True, **kw))
             assert_same_fragments(a, b)
+
+
+@pytest.mark.skipif(not kernels.available(), reason="Numba not installed")
+def test_a_render_in_inference_mode_leaves_the_kernels_usable_outside_it():
+    """The kernels' kept scratch buffers are ordinary tensors even when the first call that made them ran under
+    ``torch.inference_mode()`` (the exact images of the fits do), so a later render outside it still works."""
+    import threading
+    out = {}
+
+    def run():                                                              # a fresh thread: fresh scratch
+        camera = Camera.look_at((0.0, 0.5, 3.0), fov_y=40, width=37, height=23)
+        with torch.inference_mode():
+            first = rasterize(teapot(3), camera).face_id.clone()
+        out["same"] = torch.equal(rasterize(teapot(3), camera).face_id, first)
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join()
+    assert out == {"same": True}

@@ -126,19 +126,23 @@ def scratch(name: str, size: int, dtype):
     import torch
     held = getattr(_scratch, name, None)
     if held is None or held.numel() < size or held.dtype != dtype:
-        held = buffer(max(size, 1), dtype)
+        with torch.inference_mode(False):                                   # kept for later calls: never an
+            held = buffer(max(size, 1), dtype)                              # inference-mode tensor
         setattr(_scratch, name, held)
     return held[:size]
 
 
-def warm_up() -> dict:
-    """Compile (or load from the cache) every kernel for float32 and float64; returns seconds per kernel."""
+def warm_up(only=None) -> dict:
+    """Compile (or load from the cache) every kernel (or those named in ``only``: "screen", "zbuffer", "surface",
+    "traverse", "points", "samples") for float32 and float64; returns seconds per kernel."""
     if not _AVAILABLE:
         raise RuntimeError(_WHY)
     from . import points, samples, screen, surface, traverse, zbuffer
     times = {}
     for name, module in (("screen", screen), ("zbuffer", zbuffer), ("surface", surface), ("traverse", traverse),
                          ("points", points), ("samples", samples)):
+        if only is not None and name not in only:
+            continue
         start = time.perf_counter()
         module.warm_up()
         times[name] = time.perf_counter() - start
