@@ -43,13 +43,17 @@ from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
 from .fit import fit_camera, fit_mesh_from_silhouettes
 from .fit_texture import fit_texture_from_images, fit_vertex_colors_from_images
 from .fit_views import fit_with_learned_views
-from .shadow_gradients import shadow_image_gradient, shadowed_coverage, split_by_shadows
-from .shadow_fit import fit_light_direction
-from .shadow_art import fit_shadow_art
-from .shapes import make_shape
-from .shape_data import make_dataset, voxel_iou, voxelize
-from .learn import MeshReconstructor, load_pretrained_reconstructor, train_reconstructor
-from .mvtn import MultiViewClassifier
+from .shadows.gradients import shadow_image_gradient, shadowed_coverage, split_by_shadows
+from .shadows.fit import fit_light_direction
+from .shadows.art import fit_shadow_art
+from .learning.shapes import make_shape
+from .learning.data import make_dataset, voxel_iou, voxelize
+from .learning.reconstruction import MeshReconstructor, load_pretrained_reconstructor, train_reconstructor
+from .learning.mvtn import MultiViewClassifier
+
+from . import _moved
+
+_moved.install()                     # old module paths (course.shadow_gradients, ...) import with a warning
 
 __version__ = "0.1.0"
 

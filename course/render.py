@@ -50,7 +50,7 @@ from course.shading import (
     mip_pyramid, normalize, phong_shading, sample_texture, sample_texture_mip, uv_derivatives, view_directions,
     wireframe_overlay,
 )
-from course.shadows import shadow_factor, shadow_map
+from course.shadows.maps import shadow_factor, shadow_map
 from course.nmr import nmr_image
 from course.soft import soft_rasterize
 from course.tensors import _check_count, _check_flag, _check_real, as_tensor

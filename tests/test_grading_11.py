@@ -1,12 +1,12 @@
 """Lecture 11's graded tasks (course/grading/lecture11.py): the references agree with the package
-(course.style.gram_matrix and style_loss, course.stylize.random_directions and deep_dream_mesh's step), they
+(course.style.gram_matrix and style_loss, course.style.transfer.random_directions and deep_dream_mesh's step), they
 score full marks, a solution written as a student would scores full marks without calling them, typical
 mistakes lose points with the diagnosis a student can act on, and calling the package scores 0."""
 import math
 
 import torch
 
-from course import style, stylize
+from course.style import features as style, transfer as stylize
 from course.grading import lecture11, run_check, tasks_for_lecture
 from grading_contract import contract
 

@@ -1,10 +1,10 @@
 """Lecture 12's graded tasks (course/grading/lecture12.py): the references agree with the package
-(course.shadow_gradients.project_onto_plane, the split's shadows, variance_visibility, autograd for the
+(course.shadows.gradients.project_onto_plane, the split's shadows, variance_visibility, autograd for the
 velocity), they score full marks, a solution written as a student would scores full marks without calling
 them, typical mistakes lose points with the diagnosis a student can act on, and calling the package scores 0."""
 import torch
 
-from course import prefiltered_shadows, shadow_gradients
+from course.shadows import gradients as shadow_gradients, prefiltered as prefiltered_shadows
 from course.grading import lecture12, run_check, tasks_for_lecture
 from grading_contract import contract
 

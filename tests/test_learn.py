@@ -1,14 +1,14 @@
-"""course.learn: single-image reconstruction through the soft rasterizer (lecture 13). The suite trains a few
+"""course.learning.reconstruction: single-image reconstruction through the soft rasterizer (lecture 13). The suite trains a few
 steps only; whether the network learns the families is the bench's question (``bench learn``), not a test's."""
 import pytest
 import torch
 
-from course.learn import (MeshReconstructor, ReconstructionSettings, batched_smoothness, evaluate_reconstruction,
+from course.learning.reconstruction import (MeshReconstructor, ReconstructionSettings, batched_smoothness, evaluate_reconstruction,
                           load_pretrained_reconstructor, load_reconstructor, reconstruction_loss, retrieve,
                           save_reconstructor, shape_scores, train_reconstructor, train_step)
 from course.losses import smoothness_loss
 from course.mesh import Mesh
-from course.shape_data import make_dataset
+from course.learning.data import make_dataset
 
 SETTINGS = ReconstructionSettings(size=16, subdivisions=1)
 

@@ -5,7 +5,7 @@ import argparse
 import torch
 
 from course.bench import learn as bench
-from course.learn import load_reconstructor
+from course.learning.reconstruction import load_reconstructor
 
 
 def _args(*argv):

@@ -1,13 +1,13 @@
-"""course.mvtn: multi-view classification with views learned through the soft rasterizer (lecture 13). A few
+"""course.learning.mvtn: multi-view classification with views learned through the soft rasterizer (lecture 13). A few
 steps only; whether learned views help is the bench's question (``bench learn --parts mvtn``)."""
 import math
 
 import pytest
 import torch
 
-from course.mvtn import (MODES, MultiViewClassifier, MVTNSettings, evaluate_mvtn, make_mvtn_data,
+from course.learning.mvtn import (MODES, MultiViewClassifier, MVTNSettings, evaluate_mvtn, make_mvtn_data,
                          plot_view_directions, train_mvtn, view_directions)
-from course.shape_data import view_cameras
+from course.learning.data import view_cameras
 
 SMALL = dict(size=16, views=3)
 

@@ -1,11 +1,11 @@
-"""Variance shadow maps drawn smoothly (course.prefiltered_shadows): Chebyshev's test by hand, the image and its
-gradient converging to the exact ones (course.shadow_gradients) as the map sharpens, and the bench's rows."""
+"""Variance shadow maps drawn smoothly (course.shadows.prefiltered): Chebyshev's test by hand, the image and its
+gradient converging to the exact ones (course.shadows.gradients) as the map sharpens, and the bench's rows."""
 import pytest
 import torch
 
 from course.mesh import Mesh
-from course.prefiltered_shadows import moment_map, shadow_map_image, variance_visibility
-from course.shadow_gradients import shadow_image_gradient, shadow_scene, shadowed_coverage
+from course.shadows.prefiltered import moment_map, shadow_map_image, variance_visibility
+from course.shadows.gradients import shadow_image_gradient, shadow_scene, shadowed_coverage
 
 OCCLUDER = slice(3, 6)
 

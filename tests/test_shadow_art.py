@@ -1,14 +1,14 @@
-"""Shadow art (course.shadow_art): a flat occluder deformed until its shadow matches a target outline. Short
+"""Shadow art (course.shadows.art): a flat occluder deformed until its shadow matches a target outline. Short
 fits on small images: the shadow's IoU with the target rises for the exact gradient and the variance shadow
 map; the gradient the fit uses matches central differences of its loss, and Reynolds matches exact."""
 import pytest
 import torch
 
 from course.mesh import Mesh
-from course.shadow_art import (ShadowArtSettings, fan_areas, fit_shadow_art, save_shadow_art_gif,
+from course.shadows.art import (ShadowArtSettings, fan_areas, fit_shadow_art, save_shadow_art_gif,
                                shadow_art_figure, shadow_art_problem, shadow_iou)
-from course.shadow_art import CENTRE, _image_loss, _image_term
-from course.shadow_gradients import shadowed_coverage
+from course.shadows.art import CENTRE, _image_loss, _image_term
+from course.shadows.gradients import shadowed_coverage
 
 SHORT = ShadowArtSettings(steps=14, lr=0.05, blur=1.5)
 

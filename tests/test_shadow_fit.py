@@ -1,12 +1,12 @@
-"""The light's direction recovered from one image of its shadows (course.shadow_fit): from 30° and more away
+"""The light's direction recovered from one image of its shadows (course.shadows.fit): from 30° and more away
 to under 1°, by the exact gradient and by the boundary term (Reynolds)."""
 import math
 
 import pytest
 import torch
 
-from course.shadow_fit import LightFitSettings, angle_between, fit_light_direction
-from course.shadow_gradients import shadow_scene, shadowed_coverage
+from course.shadows.fit import LightFitSettings, angle_between, fit_light_direction
+from course.shadows.gradients import shadow_scene, shadowed_coverage
 
 
 def _rotated(v, axis, degrees):

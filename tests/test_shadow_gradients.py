@@ -1,11 +1,11 @@
-"""Hard shadows in closed form (course.shadow_gradients): the image against ray tracing with shadow rays, every
+"""Hard shadows in closed form (course.shadows.gradients): the image against ray tracing with shadow rays, every
 gradient method against float64 central differences, float32 against float64, degenerate configurations."""
 import pytest
 import torch
 
 from course.camera import Camera
 from course.mesh import Mesh
-from course.shadow_gradients import (SCENES, shadow_image_gradient, shadow_raytrace, shadow_scene,
+from course.shadows.gradients import (SCENES, shadow_image_gradient, shadow_raytrace, shadow_scene,
                                      shadowed_coverage, split_by_shadows)
 
 AMBIENT = 0.3

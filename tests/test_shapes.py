@@ -1,4 +1,4 @@
-"""course.shapes and course.shape_data: procedural shape families, their views, their voxels (lecture 13's data).
+"""course.learning.shapes and course.learning.data: procedural shape families, their views, their voxels (lecture 13's data).
 
 Oracles: the signed volume of a known cube; the rasterizer's own back-face culling (an outward closed mesh
 shows the same faces with and without it); voxel counts of boxes worked out by hand; a generalised winding
@@ -14,9 +14,9 @@ from course.fit import circle_views
 from course.mesh import Mesh
 from course.models import cube, icosphere
 from course.raster import rasterize
-from course.shape_data import (BACKGROUND, HELD_OUT, SPLITS, make_dataset, make_splits, render_views,
+from course.learning.data import (BACKGROUND, HELD_OUT, SPLITS, make_dataset, make_splits, render_views,
                                shape_seed, silhouette_iou_table, view_cameras, voxel_iou, voxelize, aspect_ratios)
-from course.shapes import M_AROUND, FAMILIES, _polygon_radius, aspect_ratio, boundary_edges, make_shape, signed_volume
+from course.learning.shapes import M_AROUND, FAMILIES, _polygon_radius, aspect_ratio, boundary_edges, make_shape, signed_volume
 
 SEEDS = range(12)
 

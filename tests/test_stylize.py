@@ -1,4 +1,4 @@
-"""Style transfer and DeepDream through the renderer (course.stylize)."""
+"""Style transfer and DeepDream through the renderer (course.style.transfer)."""
 import math
 
 import pytest
@@ -7,7 +7,7 @@ import torch
 from course import models
 from course.mesh import Mesh
 from course.style import RandomFeatures, stripes
-from course.stylize import (deep_dream_mesh, random_directions, render_texture, stylize_mesh, view_camera)
+from course.style.transfer import (deep_dream_mesh, random_directions, render_texture, stylize_mesh, view_camera)
 
 
 def test_random_directions_are_uniform_on_the_sphere_and_seeded():

@@ -24,8 +24,8 @@ import time
 
 import torch
 
-from ..learn import ReconstructionSettings, evaluate_reconstruction, save_reconstructor, train_reconstructor
-from ..shape_data import make_splits
+from ..learning.reconstruction import ReconstructionSettings, evaluate_reconstruction, save_reconstructor, train_reconstructor
+from ..learning.data import make_splits
 
 __all__ = ["bench_reconstruction", "bench_mvtn", "add_arguments", "run"]
 
@@ -82,7 +82,7 @@ def bench_mvtn(n_train=40, n_test=20, views=4, steps=150, seeds=(0, 1, 2), modes
     """Fixed against learned (and predicted) views over ``seeds``: train, test, print; returns one row per
     (mode, seed) with the accuracy and the views (for "predicted": their mean over the test shapes). plot: a
     file for ``mvtn.plot_view_directions`` of every run's views."""
-    from ..mvtn import MVTNSettings, evaluate_mvtn, make_mvtn_data, plot_view_directions, train_mvtn
+    from ..learning.mvtn import MVTNSettings, evaluate_mvtn, make_mvtn_data, plot_view_directions, train_mvtn
     t0 = time.perf_counter()
     train, test = make_mvtn_data(n_train, n_test, seed=0)
     rows = []

@@ -1,7 +1,7 @@
 """The shadow-art benchmark (lecture 12): ``python -m course bench shadow-art [--targets star T L]
 [--methods exact reynolds vsm] [--size N] [--steps K] [--figure PNG] [--gif DIR]``.
 
-A flat disc above the floor deformed until its shadow matches a target outline (``course.shadow_art``: the
+A flat disc above the floor deformed until its shadow matches a target outline (``course.shadows.art``: the
 camera sees the floor and the shadow only), once per target and gradient:
 
 * ``exact``: autograd through the exact shadowed image (``shadow_gradients.shadowed_coverage``);
@@ -21,7 +21,7 @@ import statistics
 from dataclasses import replace
 from pathlib import Path
 
-from ..shadow_art import (METHODS, TARGETS, ShadowArtSettings, fit_shadow_art, save_shadow_art_gif,
+from ..shadows.art import (METHODS, TARGETS, ShadowArtSettings, fit_shadow_art, save_shadow_art_gif,
                           shadow_art_figure, shadow_art_problem)
 
 __all__ = ["bench_shadow_art", "add_arguments", "run"]

@@ -21,8 +21,8 @@ from __future__ import annotations
 import torch
 
 from ..mesh import Mesh
-from ..prefiltered_shadows import shadow_map_image
-from ..shadow_gradients import shadow_image_gradient, shadow_scene, shadowed_coverage
+from ..shadows.prefiltered import shadow_map_image
+from ..shadows.gradients import shadow_image_gradient, shadow_scene, shadowed_coverage
 from .timing import time_it
 
 __all__ = ["measure", "bench_shadow_gradients", "plot_pareto", "add_arguments", "run"]

@@ -31,7 +31,7 @@ from ..mesh import join_meshes, Mesh
 from ..models import plane, teapot
 from ..raytrace import BVH, raycast, rectangle_light_samples, visible
 from ..shading import DirectionalLight
-from ..shadows import area_light_samples, area_shadow_factor, shadow_factor, shadow_map
+from ..shadows.maps import area_light_samples, area_shadow_factor, shadow_factor, shadow_map
 from .timing import time_it
 
 __all__ = ["shadow_scene", "receivers", "measure_hard", "measure_area", "bench_shadows", "plot_pareto",

@@ -1,7 +1,7 @@
 """The style-transfer benchmark (lecture 11): ``python -m course bench style [--steps N] [--size PX] [--fast]
 [--figure PNG]``.
 
-Lecture 11's runs at full size: ``course.stylize.stylize_mesh`` on ``models.teapot(8)`` (4,032 faces) with the
+Lecture 11's runs at full size: ``course.style.transfer.stylize_mesh`` on ``models.teapot(8)`` (4,032 faces) with the
 ``stripes`` style, 128² views, two random views a step, 300 steps, seed 0, three ways:
 
 * **soft**: soft rasterization, texture and vertices (the method);
@@ -27,7 +27,7 @@ import torch
 
 from .. import models
 from ..style import RandomFeatures, stripes
-from ..stylize import (deep_dream_mesh, held_out_style_loss, outline_change, random_directions, render_texture,
+from ..style.transfer import (deep_dream_mesh, held_out_style_loss, outline_change, random_directions, render_texture,
                        stylize_mesh, view_camera)
 
 __all__ = ["bench_style", "format_table", "save_style_picture", "add_arguments", "run"]

@@ -129,7 +129,7 @@ def _depth_bias(z, normals, to_light, fx, orthographic, bias, slope_bias, max_sl
     z / fx (perspective), tan θ between the normal's line and the direction to the light, clamped to max_slope
     (``course.shadows``' slope term, as ``shadow_factor`` computes it)."""
     with torch.no_grad():
-        tan = _ref("course.shadows", "_tan_theta")(normals, to_light, float(max_slope))
+        tan = _ref("course.shadows.maps", "_tan_theta")(normals, to_light, float(max_slope))
         texel = torch.full_like(z, 1.0 / fx) if orthographic else z / fx
         return _ref("course.shadows", "biased_depth")(torch.zeros_like(z), texel, tan, bias, slope_bias).neg()
 
@@ -189,7 +189,7 @@ def _bias_case(n, seed, dtype, orthographic, fx, spread=1.2, flip=False, scale=F
 @task("6.2", "depth_bias", points=3, reference=("course.shadows", "biased_depth"))
 def _check_depth_bias(impl):
     require(forbidden_call(impl, "depth_bias", [("course.shadows", "shadow_factor"),
-                                                ("course.shadows", "_tan_theta")]))
+                                                ("course.shadows.maps", "_tan_theta")]))
 
     def orthographic():
         _run_bias(impl, _bias_case(60, 71, torch.float64, True, 40.0) + (0.01, 1.5, 10.0),

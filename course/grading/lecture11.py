@@ -9,7 +9,7 @@ module, which registers its checks in ``course.grading.TASKS``.
   (C, H W): feature co-activations averaged over the positions (``course.style.gram_matrix``).
 * 11.2, the style loss over layers: ``Σ_l ‖G_l - T_l‖²_F / ‖T_l‖²_F`` (``course.style.style_loss``).
 * 11.3, views on the sphere: n unit vectors uniform on the sphere from a given generator
-  (``course.stylize.random_directions``); graded by statistics: unit length, seeded, the heights z uniform
+  (``course.style.transfer.random_directions``); graded by statistics: unit length, seeded, the heights z uniform
   on [-1, 1] (uniform angles crowd the poles), the azimuths uniform, no direction preferred.
 * 11.4, one DeepDream step: ``x + step · g / mean |g|`` with g the gradient of the objective at x (ascent; the
   step normalised so its size does not depend on the gradient's scale), returned detached, x unchanged.
@@ -30,7 +30,7 @@ __all__ = ["gram_matrix_reference", "style_loss_reference", "random_directions_r
            "deep_dream_step_reference"]
 
 FORBIDDEN = [("course.style", "gram_matrix"), ("course.style", "style_loss"), ("course.style", "RandomFeatures"),
-             ("course.stylize", "random_directions"), ("course.stylize", "deep_dream_mesh"),
+             ("course.style.transfer", "random_directions"), ("course.style.transfer", "deep_dream_mesh"),
              ("course.grading.lecture11", "gram_matrix_reference"),
              ("course.grading.lecture11", "style_loss_reference"),
              ("course.grading.lecture11", "random_directions_reference"),
@@ -275,7 +275,7 @@ def _uniformity(d, name):
     return None
 
 
-@task("11.3", "random_directions", points=3, reference=("course.stylize", "random_directions"))
+@task("11.3", "random_directions", points=3, reference=("course.style.transfer", "random_directions"))
 def _check_random_directions(impl):
     forbidden = forbidden_call(impl, "random_directions", FORBIDDEN)
     if forbidden:

@@ -6,12 +6,12 @@ says what to fix, recognising the typical mistakes of the task. ``import course.
 module, which registers its checks in ``course.grading.TASKS``.
 
 * 12.1, the shadow of points on a plane under a directional light: ``x' = x - h / (n̂ · l) · l`` with
-  ``h = n̂ · (x - p)`` the height above the plane (``course.shadow_gradients.project_onto_plane``).
+  ``h = n̂ · (x - p)`` the height above the plane (``course.shadows.gradients.project_onto_plane``).
 * 12.2, how fast those shadows move when the light turns: the derivative of 12.1 along ``dl``,
   ``v = -h / (n̂ · l) · dl + h (n̂ · dl) / (n̂ · l)² · l`` (both the step's direction and its length change).
 * 12.3, a variance shadow map's test: with the moments μ = E[z], m₂ = E[z²] at a receiver of depth d,
   ``σ² = max(m₂ - μ², min_variance)`` and the fraction lit ``σ² / (σ² + (d - μ)²)`` where d > μ, 1 elsewhere
-  (Chebyshev's bound; ``course.prefiltered_shadows.variance_visibility`` after its map lookup).
+  (Chebyshev's bound; ``course.shadows.prefiltered.variance_visibility`` after its map lookup).
 * 12.4, one step of the light fit on the sphere of directions: the gradient's part along the light is
   dropped (it would only change the length), the step taken, the result renormalised:
   ``normalize(l - lr (g - (g · l) l))``.
@@ -29,8 +29,8 @@ from .registry import forbidden_call, task
 __all__ = ["project_onto_plane_reference", "shadow_velocity_reference", "variance_lit_reference",
            "light_step_reference"]
 
-FORBIDDEN = [("course.shadow_gradients", "project_onto_plane"), ("course.shadow_gradients", "split_by_shadows"),
-             ("course.prefiltered_shadows", "variance_visibility"), ("course.shadow_fit", "fit_light_direction"),
+FORBIDDEN = [("course.shadows.gradients", "project_onto_plane"), ("course.shadows.gradients", "split_by_shadows"),
+             ("course.shadows.prefiltered", "variance_visibility"), ("course.shadows.fit", "fit_light_direction"),
              ("course.grading.lecture12", "project_onto_plane_reference"),
              ("course.grading.lecture12", "shadow_velocity_reference"),
              ("course.grading.lecture12", "variance_lit_reference"),
@@ -161,7 +161,7 @@ def _project_problem(impl, label, x, p, n, l):
     return message
 
 
-@task("12.1", "project_onto_plane", points=2, reference=("course.shadow_gradients", "project_onto_plane"))
+@task("12.1", "project_onto_plane", points=2, reference=("course.shadows.gradients", "project_onto_plane"))
 def _check_project(impl):
     forbidden = forbidden_call(impl, "project_onto_plane", FORBIDDEN)
     if forbidden:
@@ -279,7 +279,7 @@ def _lit_problem(impl, label, mu, m2, d, min_variance):
     return message
 
 
-@task("12.3", "variance_lit", points=2, reference=("course.prefiltered_shadows", "variance_visibility"))
+@task("12.3", "variance_lit", points=2, reference=("course.shadows.prefiltered", "variance_visibility"))
 def _check_variance(impl):
     forbidden = forbidden_call(impl, "variance_lit", FORBIDDEN)
     if forbidden:

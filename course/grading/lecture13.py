@@ -6,12 +6,12 @@ says what to fix, recognising the typical mistakes of the task. ``import course.
 module, which registers its checks in ``course.grading.TASKS``.
 
 * 13.1, the voxel IoU of two occupancy grids (Kato et al.'s Table 1 metric): ``|a ∩ b| / |a ∪ b|``, 1.0 when
-  both are empty, a ValueError for grids of different shapes (``course.shape_data.voxel_iou``).
+  both are empty, a ValueError for grids of different shapes (``course.learning.data.voxel_iou``).
 * 13.2, the silhouette IoU loss of a batch of shapes seen from several views: soft silhouettes (B, V, H, W),
   ``1 - Σ ŝ s / Σ (ŝ + s - ŝ s)`` per shape and view, averaged over both (an empty pair counts 0).
 * 13.3, cameras on a sphere, differentiable in their angles: eyes ``d (cos e sin a, sin e, cos e cos a)`` (+z at
-  azimuth 0, +x at 90°, y up; the course's convention, ``course.shape_data.view_cameras``), with autograd
-  reaching the azimuths and elevations (what lets a network learn where to look; ``course.mvtn.view_directions``
+  azimuth 0, +x at 90°, y up; the course's convention, ``course.learning.data.view_cameras``), with autograd
+  reaching the azimuths and elevations (what lets a network learn where to look; ``course.learning.mvtn.view_directions``
   in degrees, times the distance).
 * 13.4, one training step: clear the gradients, forward, loss, backward, step; return the loss before the step
   as a float.
@@ -28,8 +28,8 @@ from .registry import forbidden_call, task
 
 __all__ = ["voxel_iou_reference", "multiview_iou_loss_reference", "view_eyes_reference", "train_step_reference"]
 
-FORBIDDEN = [("course.shape_data", "voxel_iou"), ("course.losses", "silhouette_iou_loss"),
-             ("course.mvtn", "view_directions"),
+FORBIDDEN = [("course.learning.data", "voxel_iou"), ("course.losses", "silhouette_iou_loss"),
+             ("course.learning.mvtn", "view_directions"),
              ("course.grading.lecture13", "voxel_iou_reference"),
              ("course.grading.lecture13", "multiview_iou_loss_reference"),
              ("course.grading.lecture13", "view_eyes_reference"),
@@ -143,7 +143,7 @@ def _voxel_problem(impl, label, a, b):
     return f"{name}: {want:.6g} expected, got {got:.6g}"
 
 
-@task("13.1", "voxel_iou", points=2, reference=("course.shape_data", "voxel_iou"))
+@task("13.1", "voxel_iou", points=2, reference=("course.learning.data", "voxel_iou"))
 def _check_voxel(impl):
     forbidden = forbidden_call(impl, "voxel_iou", FORBIDDEN)
     if forbidden:

@@ -219,7 +219,7 @@ def draw_shadow_map(resolution: int = 64, bias: float = 0.0, slope_bias: float =
     shadow off the wall's foot (peter-panning: a lit gap at x = 0.5). Higher resolution shrinks both; PCF
     softens the staircase of the shadow's edge.
     """
-    from ..shadows import shadow_factor, shadow_map
+    from ..shadows.maps import shadow_factor, shadow_map
     resolution = int(_check_range("resolution", resolution, 8, 2048))
     bias, slope_bias = _check_range("bias", bias, 0.0, 50.0), _check_range("slope_bias", slope_bias, 0.0, 50.0)
     pcf = _check_choice("pcf", pcf, (1, 3, 5, 7, 9))
@@ -776,7 +776,7 @@ def style_weight_explorer() -> None:
 # ------------------------------------------------------------------------------------------------ lecture 12
 @cache
 def _shadow_problem():
-    from ..shadow_gradients import shadow_scene
+    from ..shadows.gradients import shadow_scene
     return shadow_scene("floater", 20)
 
 
@@ -789,7 +789,7 @@ def draw_shadow_light(azimuth: float = 30.0, elevation: float = 60.0) -> dict:
     exact: the image is the area of the lit part of each pixel, a smooth function of the light between the
     moments when a shadow edge crosses a vertex. Lower the light and the shadow stretches; its gradient grows.
     """
-    from ..shadow_gradients import shadowed_coverage
+    from ..shadows.gradients import shadowed_coverage
     azimuth, elevation = _check_range("azimuth", azimuth, -180.0, 180.0), _check_range("elevation", elevation,
                                                                                        15.0, 89.0)
     mesh, camera, colors, _ = _shadow_problem()

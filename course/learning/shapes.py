@@ -23,7 +23,7 @@ seen from outside (DESIGN.md's front faces). The poles' fans are wound to match.
 that, positive signed volume, determinism and variety for many seeds).
 
 Randomness: ``make_shape(family, seed)`` draws everything from ``numpy.random.default_rng(seed)``; the
-same seed gives bit-identical vertices on one machine. The dataset (``course.shape_data``) derives each
+same seed gives bit-identical vertices on one machine. The dataset (``course.learning.data``) derives each
 shape's seed from (dataset seed, split, family, index).
 """
 from __future__ import annotations
@@ -33,8 +33,8 @@ import math
 import numpy as np
 import torch
 
-from .mesh import Mesh
-from .tensors import _check_count, _check_device, _check_dtype
+from ..mesh import Mesh
+from ..tensors import _check_count, _check_device, _check_dtype
 
 __all__ = ["FAMILIES", "make_shape", "signed_volume", "boundary_edges", "aspect_ratio"]
 

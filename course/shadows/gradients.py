@@ -60,11 +60,11 @@ from dataclasses import dataclass
 
 import torch
 
-from .camera import Camera
-from .coverage import exact_coverage
-from .mesh import Mesh
-from .tensors import as_tensor
-from .visibility import image_gradient
+from ..camera import Camera
+from ..coverage import exact_coverage
+from ..mesh import Mesh
+from ..tensors import as_tensor
+from ..visibility import image_gradient
 
 __all__ = ["SCENES", "shadow_scene", "SplitMesh", "project_onto_plane", "split_by_shadows", "shadowed_coverage",
            "shadow_image_gradient", "shadow_raytrace", "SHADOW_METHODS", "GRAZING"]
@@ -129,7 +129,7 @@ def shadow_scene(name: str, size: int = 16, *, orthographic: bool = False, dtype
         verts = [[-1.5, 0, -1], [-1.5, 0, 1], [0, 0, 1], [0, 0, -1], [0.6, 1.2, 1], [0.6, 1.2, -1]]
         faces = [[0, 1, 2], [0, 2, 3], [3, 2, 4], [3, 4, 5]]                # flat part up, wall toward -x
     if name in ("box", "crossing"):
-        from .models import cube
+        from ..models import cube
         box = cube(1.0, dtype=torch.float64)
         verts += (box.verts + torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64)).tolist()
         walls = box.faces[(box.verts[box.faces][:, :, 1] > -0.5).any(1)]    # no bottom: it would lie on the floor
@@ -613,7 +613,7 @@ def shadow_raytrace(mesh, camera, face_colors, light, ambient=0.3, background=(0
     a camera with ``supersample`` times the resolution), one shadow ray per hit (``raytrace.visible`` with the
     faces' front normals, so a face turned away from the light is shadowed), box-averaged. (H, W, 3) float64.
     The reference ``shadowed_coverage`` converges to as ``supersample`` grows."""
-    from .raytrace import BVH, raycast, visible                             # the reference only
+    from ..raytrace import BVH, raycast, visible                             # the reference only
     verts, faces, d = _check_scene(mesh, light, point)
     s = int(supersample)
     if s < 1:

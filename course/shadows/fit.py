@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .shadow_gradients import _check_scene, shadow_image_gradient, shadowed_coverage
-from .tensors import as_tensor
+from .gradients import _check_scene, shadow_image_gradient, shadowed_coverage
+from ..tensors import as_tensor
 
 __all__ = ["LightFitSettings", "LightFit", "angle_between", "fit_light_direction"]
 

@@ -44,10 +44,10 @@ from types import SimpleNamespace
 
 import torch
 
-from .camera import Camera, project_points
-from .raster import rasterize
-from .shading import DirectionalLight, PointLight
-from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
+from ..camera import Camera, project_points
+from ..raster import rasterize
+from ..shading import DirectionalLight, PointLight
+from ..tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "light_space", "biased_depth",
            "biased_lit", "pcf", "shadow_factor", "area_light_samples", "area_shadow_factor"]

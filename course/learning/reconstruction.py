@@ -9,7 +9,7 @@ Kato et al.'s IoU loss, plus their smoothness loss so the sphere deforms without
     image (H, W, 3) ─encoder─▶ code (64,) ─heads─▶ verts = (sphere + offsets) · scale + translation (V, 3)
     verts ─soft_rasterize(views)─▶ (Nv, H, W) ─silhouette_iou_loss(·, targets)─▶ + λ smoothness_loss
 
-The views and the data come from ``course.shape_data`` (image of view 0 in, silhouettes of all views out).
+The views and the data come from ``course.learning.data`` (image of view 0 in, silhouettes of all views out).
 The soft silhouette needs a blur of about a pixel to pass gradients from pixels the mesh misses: σ = 3e-3 in
 the NDC units of ``soft_rasterize`` is σ_px = σ W² / 4 ≈ 0.8 px² at W = 32; ``train_reconstructor`` then
 sharpens it tenfold over training, because a blurred outline is wider than the mesh's and a network fitted to
@@ -35,19 +35,19 @@ from pathlib import Path
 
 import torch
 
-from .losses import interior_edges, silhouette_iou_loss
-from .mesh import Mesh
-from .models import icosphere
-from .shape_data import voxel_iou, voxelize
-from .shape_metrics import chamfer_distance
-from .soft import soft_rasterize
-from .tensors import _check_count, _check_real
+from ..losses import interior_edges, silhouette_iou_loss
+from ..mesh import Mesh
+from ..models import icosphere
+from .data import voxel_iou, voxelize
+from ..shape_metrics import chamfer_distance
+from ..soft import soft_rasterize
+from ..tensors import _check_count, _check_real
 
 __all__ = ["ReconstructionSettings", "MeshReconstructor", "reconstruction_loss", "batched_smoothness", "train_step",
            "train_reconstructor", "retrieve", "shape_scores", "evaluate_reconstruction", "save_reconstructor",
            "load_reconstructor", "load_pretrained_reconstructor", "PRETRAINED"]
 
-PRETRAINED = Path(__file__).parent / "data" / "reconstructor.pt"
+PRETRAINED = Path(__file__).parents[1] / "data" / "reconstructor.pt"
 
 
 @dataclass(frozen=True)

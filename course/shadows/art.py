@@ -56,11 +56,11 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .camera import Camera
-from .mesh import Mesh
-from .prefiltered_shadows import shadow_map_image
-from .shadow_fit import _blur
-from .shadow_gradients import shadow_image_gradient, shadowed_coverage
+from ..camera import Camera
+from ..mesh import Mesh
+from .prefiltered import shadow_map_image
+from .fit import _blur
+from .gradients import shadow_image_gradient, shadowed_coverage
 
 __all__ = ["TARGETS", "METHODS", "ShadowArtProblem", "ShadowArtSettings", "ShadowArtFit", "shadow_art_problem",
            "shadow_fraction", "shadow_iou", "fan_areas", "fit_shadow_art", "save_shadow_art_gif", "shadow_art_figure"]
@@ -378,8 +378,8 @@ def _side_by_side(left, right, gap: int = 2):
 
 def save_shadow_art_gif(problem: ShadowArtProblem, fit: ShadowArtFit, path, *, fps: float = 8):
     """A GIF of ``fit``'s snapshots (``fit_shadow_art(..., frames=K)``), each frame the target and the fit's
-    exact image side by side, labelled with the step and the IoU (``viz_fit.save_gif``). Returns the path."""
-    from .viz_fit import save_gif
+    exact image side by side, labelled with the step and the IoU (``frames.save_gif``). Returns the path."""
+    from ..frames import save_gif
     if not fit.snapshots:
         raise ValueError("the fit kept no snapshots: run fit_shadow_art with frames >= 2")
     frames = [_side_by_side(problem.target, s) for s in fit.snapshots]
@@ -402,7 +402,7 @@ def shadow_art_figure(problem: ShadowArtProblem, fits, *, size: float = 2.6):
     shadow drawn over them: its outline in red, its spokes faint) and the IoU per step of every fit.
     fits: a list of ``ShadowArtFit`` (e.g. exact and vsm). Returns the figure."""
     import matplotlib.pyplot as plt
-    from .viz_fit import image_to_frame
+    from ..frames import image_to_frame
     fits = list(fits)
     if not fits or not all(isinstance(f, ShadowArtFit) for f in fits):
         raise ValueError("fits must be a non-empty list of ShadowArtFit")

@@ -1,4 +1,4 @@
-"""The data lecture 13 learns from: shapes of ``course.shapes``' families, their rendered views, their voxels.
+"""The data lecture 13 learns from: shapes of ``course.learning.shapes``' families, their rendered views, their voxels.
 
 * ``make_dataset(n_per_family, families=..., seed=0, split="train", views=2, size=32)`` a ``ShapeSet``:
   n shapes of each family with their family labels, and per shape and view a hard silhouette
@@ -24,12 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .camera import Camera
-from .fit import shaded_face_colors
-from .mesh import Mesh
-from .raster import rasterize
+from ..camera import Camera
+from ..fit import shaded_face_colors
+from ..mesh import Mesh
+from ..raster import rasterize
 from .shapes import FAMILIES, aspect_ratio, make_shape
-from .tensors import _check_count, _check_device, _check_real
+from ..tensors import _check_count, _check_device, _check_real
 
 __all__ = ["ShapeSet", "SPLITS", "HELD_OUT", "BACKGROUND", "shape_seed", "view_cameras", "make_dataset", "make_splits",
            "render_views", "voxelize", "voxel_iou", "silhouette_iou_table", "aspect_ratios"]

@@ -30,13 +30,13 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .camera import Camera
-from .mesh import Mesh
-from .raster import interpolate, rasterize
-from .soft import soft_rasterize
-from .style import RandomFeatures, _check_image, style_loss
-from .tensors import _check_count, _check_real
-from .textures import sample_texture
+from ..camera import Camera
+from ..mesh import Mesh
+from ..raster import interpolate, rasterize
+from ..soft import soft_rasterize
+from .features import RandomFeatures, _check_image, style_loss
+from ..tensors import _check_count, _check_real
+from ..textures import sample_texture
 
 __all__ = ["random_directions", "view_camera", "render_texture", "stylize_mesh", "deep_dream_mesh", "StyleRun",
            "held_out_style_loss", "outline_change", "RENDERERS"]

@@ -23,7 +23,7 @@ import math
 
 import torch
 
-from .tensors import _check_count, _check_real, as_tensor
+from ..tensors import _check_count, _check_real, as_tensor
 
 __all__ = ["RandomFeatures", "gram_matrix", "style_loss", "synthesize_texture", "stripes", "dots", "marble"]
 

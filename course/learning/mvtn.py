@@ -40,12 +40,12 @@ from dataclasses import dataclass
 
 import torch
 
-from .camera import Camera, intrinsics_from_fov, look_at
-from .shape_data import make_dataset
-from .shape_metrics import sample_surface
+from ..camera import Camera, intrinsics_from_fov, look_at
+from .data import make_dataset
+from ..shape_metrics import sample_surface
 from .shapes import FAMILIES
-from .soft import soft_rasterize
-from .tensors import _check_count, _check_real
+from ..soft import soft_rasterize
+from ..tensors import _check_count, _check_real
 
 __all__ = ["MVTNSettings", "MultiViewClassifier", "make_mvtn_data", "view_directions", "train_mvtn",
            "evaluate_mvtn", "plot_view_directions", "MODES"]

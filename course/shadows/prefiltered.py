@@ -30,11 +30,11 @@ from __future__ import annotations
 
 import torch
 
-from .mesh import Mesh
-from .raster import rasterize
-from .camera import Camera
-from .tensors import as_tensor
-from .shadow_gradients import GRAZING, _check_ambient, _check_colors, _check_scene
+from ..mesh import Mesh
+from ..raster import rasterize
+from ..camera import Camera
+from ..tensors import as_tensor
+from .gradients import GRAZING, _check_ambient, _check_colors, _check_scene
 
 __all__ = ["light_frame", "moment_map", "variance_visibility", "shadow_map_image"]
 
