@@ -3,8 +3,9 @@
 ``pytest`` (pyproject's addopts) runs on up to four worker processes (pytest-xdist):
 
 * a notebook's cells share one kernel and run in order, so nbval's items of one notebook form one unit of work,
-  which one worker runs from start to end; every other test is handed out on its own
-  (``pytest_xdist_make_scheduler``);
+  which one worker runs from start to end; so does each test module with expensive module-scoped fixtures
+  (``WHOLE_MODULES``); every other test is handed out on its own, and the units go out longest first
+  (``_order``: a long unit started last would leave the other core idle);
 * a worker's own torch runs on one thread (the workers are the parallelism; notebook kernels and the
   reproducibility pass keep their own settings), and every process started from here lets idle OpenMP threads
   sleep (``OMP_WAIT_POLICY=PASSIVE``): spinning threads of two kernels on two cores cost lecture 09 61 s instead
@@ -41,19 +42,77 @@ def pytest_configure(config):
         os.environ["COURSE_SUITE_WARMED"] = "1"           # the reproducibility pass's pytest runs need not again
 
 
+# Test modules whose module-scoped fixtures are expensive (a class graded, a wheel built and installed): each is
+# one unit of work, so that its fixtures are made once, not once per worker.
+WHOLE_MODULES = {f"tests/{name}.py" for name in (
+    "test_grading_attacks", "test_gradescope", "test_grader_class", "test_gradebook", "test_flags", "test_grading",
+    "test_remote", "test_fit", "test_fit_images", "test_fit_texture", "test_fit_views", "test_learn", "test_mvtn",
+    "test_shadow_art", "test_shapes", "test_viz_fit")}
+REPRODUCIBLE = "tests/test_notebooks_reproducible.py::test_outputs_are_the_same_with_other_vector_code_and_one_thread["
+
+
+def _scope(nodeid: str) -> str:
+    """The unit of work a test belongs to: its notebook, its module (``WHOLE_MODULES``), or itself."""
+    path = nodeid.split("::")[0]
+    return path if path.endswith(".ipynb") or path in WHOLE_MODULES else nodeid
+
+
+def _order(scope: str, size: int):
+    """Longest first, so that no long unit starts last: the grading attacks (about 150 s), the reproducibility
+    runs (a lecture and its solution each; later lectures are longer), the notebooks (most cells first), the
+    other whole modules, then every other test in collection order."""
+    if scope == "tests/test_grading_attacks.py":
+        return (0, 0)
+    if scope.startswith(REPRODUCIBLE):
+        number = scope[len(REPRODUCIBLE):len(REPRODUCIBLE) + 2]
+        return (1, -int(number) if number.isdigit() else 0)
+    if scope.endswith(".ipynb"):
+        return (2, -size)
+    if scope in WHOLE_MODULES:
+        return (3, -size)
+    return (4, 0)
+
+
 class _Scheduler:
-    """Work units: a whole notebook (nbval's cells share one kernel), or one test. Units with the most tests
-    (the notebooks) are handed out first (xdist's loadscope ordering), so a long notebook never starts last."""
+    """Work units (``_scope``) handed out longest first (``_order``)."""
 
     @staticmethod
     def pytest_xdist_make_scheduler(config, log):
         from xdist.scheduler import LoadScopeScheduling
 
-        class NotebookScheduling(LoadScopeScheduling):
+        class CourseScheduling(LoadScopeScheduling):
             def _split_scope(self, nodeid):
-                path = nodeid.split("::")[0]
-                return path if path.endswith(".ipynb") else nodeid
-        return NotebookScheduling(config, log)
+                return _scope(nodeid)
+
+            def schedule(self):
+                """LoadScopeScheduling.schedule with the work queue in ``_order``."""
+                assert self.collection_is_completed
+                if self.collection is not None:
+                    for node in self.nodes:
+                        self._reschedule(node)
+                    return
+                if not self._check_nodes_have_same_collection():
+                    self.log("**Different tests collected, aborting run**")
+                    return
+                self.collection = list(next(iter(self.registered_collections.values())))
+                if not self.collection:
+                    return
+                units = {}
+                for nodeid in self.collection:
+                    units.setdefault(self._split_scope(nodeid), {})[nodeid] = False
+                for scope, nodeids in sorted(units.items(), key=lambda item: _order(item[0], len(item[1]))):
+                    self.workqueue[scope] = nodeids
+                for _ in range(max(0, len(self.nodes) - len(self.workqueue))):
+                    unused, _assigned = self.assigned_work.popitem()
+                    unused.shutdown()
+                for node in self.nodes:
+                    self._assign_work_unit(node)
+                for node in self.nodes:
+                    self._reschedule(node)
+                if not self.workqueue:
+                    for node in self.nodes:
+                        node.shutdown()
+        return CourseScheduling(config, log)
 
 
 _NOTEBOOK_TIMES = defaultdict(float)
