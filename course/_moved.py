@@ -28,6 +28,7 @@ MOVED = {
     "course.shape_data": "course.learning.data",
     "course.learn": "course.learning.reconstruction",
     "course.mvtn": "course.learning.mvtn",
+    "course.viz_fit": "course.viz.fit",
 }
 
 

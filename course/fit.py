@@ -72,7 +72,7 @@ class FitHistory:
     step ``steps`` is the final state); ``snapshots``: detached copies (vertices (V, 3) for a mesh fit,
     rendered images (H, W) or (H, W, C) for a camera fit); ``metrics``: named series, one value per step
     (``steps`` or ``steps + 1`` entries, e.g. the rotation error of a camera fit) or one per snapshot
-    (``len(snapshot_steps)`` entries, e.g. a held-out PSNR measured only at snapshots); ``viz_fit.plot_history``
+    (``len(snapshot_steps)`` entries, e.g. a held-out PSNR measured only at snapshots); ``viz.fit.plot_history``
     tells them apart by length."""
     loss: list = field(default_factory=list)
     snapshot_steps: list = field(default_factory=list)

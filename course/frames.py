@@ -1,7 +1,7 @@
 """Images as frames: an image tensor as an 8-bit RGB frame the way the course shows it, and frames as a GIF.
 
-The fits' animations (``course.viz_fit``) and shadow art's (``course.shadows.art``) are written with these.
-They live apart from ``viz_fit`` (which re-exports both) because they need nothing of the renderer: a module
+The fits' animations (``course.viz.fit``) and shadow art's (``course.shadows.art``) are written with these.
+They live apart from ``course.viz.fit`` (which re-exports both) because they need nothing of the renderer: a module
 that only writes pictures can use them without importing ``render``.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Figures and animations of fits (course.viz_fit): frames are (H, W, 3) uint8 shown like ``viz.show_image``,
+"""Figures and animations of fits (course.viz.fit): frames are (H, W, 3) uint8 shown like ``viz.show_image``,
 GIFs round-trip through Pillow, figures show what they say, and bad inputs raise ValueErrors naming the problem."""
 import matplotlib
 
@@ -10,7 +10,8 @@ import pytest  # noqa: E402
 import torch  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from course import models, viz, viz_fit  # noqa: E402
+from course import models, viz  # noqa: E402
+from course.viz import fit as viz_fit  # noqa: E402
 from course.camera import Camera  # noqa: E402
 from course.fit import FitHistory, fit_silhouettes, sphere_views  # noqa: E402
 from course.shading import linear_to_srgb  # noqa: E402

@@ -180,7 +180,7 @@ def save_fit_picture(target, result, path, size: int = 256):
     import matplotlib.pyplot as plt
 
     from ..camera import Camera
-    from ..viz_fit import image_to_frame, mesh_renderer
+    from ..viz.fit import image_to_frame, mesh_renderer
     eyes = ((2.0, 1.3, 1.9), (0.0, 0.25, 3.0))
     items = ((target, "target"), (result.start, f"start: the visual hull\nheld-out IoU {result.start_iou:.3f}, "
                                                  f"PSNR {result.start_psnr:.1f} dB"),

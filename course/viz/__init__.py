@@ -5,7 +5,7 @@ and returns the figure, so a notebook can both show it and pin it with a printed
 
 The figures are split by topic: ``core`` (images, grids, 3D points and meshes, the explorer; every lecture),
 ``cameras`` (lectures 01-02), ``raster`` (03), ``shading`` (04), ``antialias`` (05), ``raytrace`` (07), ``gradients``
-(09); a fit's curves and GIFs are in ``course.viz_fit``. Everything is re-exported here:
+(09); a fit's curves and GIFs are in ``course.viz.fit``. Everything is re-exported here:
 ``from course import viz; viz.show_image(...)``.
 """
 from __future__ import annotations
@@ -24,5 +24,5 @@ from .explorers import *  # noqa: F401,F403
 __all__ = (list(_core_all) + cameras.__all__ + raster.__all__ + shading.__all__ + antialias.__all__ + raytrace.__all__
            + gradients.__all__ + explorers.__all__)
 
-from ..viz_fit import fit_figure, history_frames, mesh_renderer, plot_history, save_fit_gif, save_gif, show_gif
+from .fit import fit_figure, history_frames, mesh_renderer, plot_history, save_fit_gif, save_gif, show_gif
 __all__ += ["plot_history", "history_frames", "mesh_renderer", "save_gif", "save_fit_gif", "fit_figure", "show_gif"]

@@ -28,10 +28,7 @@ import torch
 __all__ = ["plot_history", "history_frames", "image_to_frame", "mesh_renderer", "save_gif", "save_fit_gif",
            "fit_figure", "show_gif"]
 
-from .frames import (  # frames: image_to_frame and save_gif, re-exported
-    image_to_frame,
-    save_gif,
-)
+from ..frames import image_to_frame, save_gif       # re-exported: course.frames writes them
 
 # ------------------------------------------------------------------------------------------ helpers
 
@@ -166,9 +163,9 @@ def mesh_renderer(faces, camera, *, settings=None, lights=None, background=(1.0,
     The returned callable takes vertices (V, 3) (drawn with ``faces``) or a whole ``Mesh`` (drawn with its
     own faces, e.g. the target) and returns the (H, W, 3) linear image, without a gradient.
     """
-    from .camera import Camera
-    from .mesh import Mesh
-    from .render import RenderSettings, Scene, default_lights, render
+    from ..camera import Camera
+    from ..mesh import Mesh
+    from ..render import RenderSettings, Scene, default_lights, render
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a course.camera.Camera, got {type(camera).__name__}")
     faces = torch.as_tensor(faces)
