@@ -39,10 +39,10 @@ from .shading import (AmbientLight, DirectionalLight, Material, PointLight, blin
 from .shadows import SpotLight, shadow_factor, shadow_map
 from .nmr import nmr_image, nmr_rasterize
 from .soft import soft_rasterize
-from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
-from .fit import fit_camera, fit_mesh_from_silhouettes
-from .fit_texture import fit_texture_from_images, fit_vertex_colors_from_images
-from .fit_views import fit_with_learned_views
+from .inverse.losses import iou, psnr, silhouette_iou_loss, smoothness_loss
+from .inverse import fit_camera, fit_mesh_from_silhouettes
+from .inverse.texture import fit_texture_from_images, fit_vertex_colors_from_images
+from .inverse.views import fit_with_learned_views
 from .shadows.gradients import shadow_image_gradient, shadowed_coverage, split_by_shadows
 from .shadows.fit import fit_light_direction
 from .shadows.art import fit_shadow_art

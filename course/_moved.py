@@ -29,6 +29,13 @@ MOVED = {
     "course.learn": "course.learning.reconstruction",
     "course.mvtn": "course.learning.mvtn",
     "course.viz_fit": "course.viz.fit",
+    "course.fit": "course.inverse",
+    "course.losses": "course.inverse.losses",
+    "course.large_steps": "course.inverse.large_steps",
+    "course.carve": "course.inverse.carve",
+    "course.shape_metrics": "course.inverse.metrics",
+    "course.fit_texture": "course.inverse.texture",
+    "course.fit_views": "course.inverse.views",
 }
 
 

@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from course import camera as C
-from course import fit, fit_texture, fit_views, losses, models, raster, raytrace, shading, shadows, textures, viz
+from course import inverse as fit, models, raster, raytrace, shading, shadows, textures, viz
+from course.inverse import losses, texture as fit_texture, views as fit_views
 from course.camera import Camera
 from course.mesh import Mesh, join_meshes, load_mesh
 from course.render import RenderSettings, Scene, render

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from course import fit
+from course import inverse as fit
 from course.bench import BENCHES, cli
 from course.bench import fit as fb
 

@@ -1,14 +1,15 @@
-"""The visual hull (course.carve): surface nets on analytic fields, carving a sphere and a torus, bad input."""
+"""The visual hull (course.inverse.carve): surface nets on analytic fields, carving a sphere and a torus, bad input."""
 import math
 
 import pytest
 import torch
 
-from course import carve, models
+from course import models
+from course.inverse import carve
 from course.camera import Camera
-from course.fit import coverage_masks, sphere_views
+from course.inverse import coverage_masks, sphere_views
 from course.mesh import Mesh
-from course.shape_metrics import chamfer_distance
+from course.inverse.metrics import chamfer_distance
 
 
 def _topology(mesh):

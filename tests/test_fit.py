@@ -1,4 +1,4 @@
-"""Tests of course.fit: each loop improves its metric in a short run, histories, seeding, bad inputs."""
+"""Tests of course.inverse: each loop improves its metric in a short run, histories, seeding, bad inputs."""
 import math
 
 import pytest
@@ -6,7 +6,7 @@ import torch
 
 from course import models
 from course.camera import Camera, axis_angle_to_matrix
-from course.fit import (CameraFit, FitHistory, SilhouetteFit, camera_problem, center_error, circle_views,
+from course.inverse import (CameraFit, FitHistory, SilhouetteFit, camera_problem, center_error, circle_views,
                         fit_camera, fit_silhouettes, hard_silhouettes, rotation_error, self_intersections,
                         shaded_face_colors, sphere_views)
 from course.mesh import Mesh
@@ -191,8 +191,8 @@ def _ellipsoid():
 def _pose_gradient(mesh, colors, start, ref, method, **options):
     """dL/dω at ω = 0 (L2 loss against ref) by autograd through exact_coverage or by _boundary_backward."""
     from course.coverage import exact_coverage
-    from course.fit import _boundary_backward, _detached
-    from course.losses import l2_loss
+    from course.inverse.pose import _boundary_backward, _detached
+    from course.inverse.losses import l2_loss
     omega = torch.zeros(3, dtype=torch.float64, requires_grad=True)
     size = start.width
     cam = Camera(start.K, start.R @ axis_angle_to_matrix(omega), start.t, size, size, start.near, start.far)

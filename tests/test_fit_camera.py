@@ -7,8 +7,8 @@ import torch
 
 from course import models
 from course.camera import Camera, axis_angle_to_matrix
-from course.fit import (_area, _candidate_starts, _pyramid, camera_problem, fit_camera,
-                        rotation_error, shaded_face_colors)
+from course.inverse import shaded_face_colors
+from course.inverse.pose import _area, _candidate_starts, _pyramid, camera_problem, fit_camera, rotation_error
 from course.mesh import Mesh
 from course.raster import interpolate, rasterize
 from course.render import RenderSettings, Scene, default_lights, render

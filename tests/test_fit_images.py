@@ -1,8 +1,9 @@
-"""A mesh from shaded images (course.fit.fit_mesh_from_images): the exact gradient, short fits, bad input."""
+"""A mesh from shaded images (course.inverse.fit_mesh_from_images): the exact gradient, short fits, bad input."""
 import pytest
 import torch
 
-from course import fit, models
+from course import inverse as fit, models
+from course.inverse.shaded import _reynolds_backward
 from course.coverage import exact_coverage
 from course.mesh import Mesh
 
@@ -32,7 +33,7 @@ def test_reynolds_backward_matches_central_differences_of_the_exact_loss(teapot)
         return sum(image_loss(exact_coverage(mesh, c, colors, bg), t) for c, t in zip(cams, targets))
 
     v = sphere.verts.clone().requires_grad_(True)
-    total = fit._reynolds_backward(image_loss, v, sphere.faces, fit.shaded_face_colors(Mesh(v, sphere.faces)),
+    total = _reynolds_backward(image_loss, v, sphere.faces, fit.shaded_face_colors(Mesh(v, sphere.faces)),
                                    cams, targets, fit.SKY)
     assert float(total) == pytest.approx(float(loss(sphere.verts)), rel=1e-12)
     moved = (v.grad.norm(dim=1) > 0).nonzero()[:, 0]

@@ -1,4 +1,4 @@
-"""Tests of course.fit_texture: texture and vertex-colour fits improve held-out PSNR, recover a known texture,
+"""Tests of course.inverse.texture: texture and vertex-colour fits improve held-out PSNR, recover a known texture,
 touch only what the views see, are seeded, agree with render(), and reject bad inputs. Small images (32²)."""
 import math
 
@@ -6,11 +6,11 @@ import pytest
 import torch
 
 from course import models
-from course.fit import FitHistory, sphere_views
-from course.fit_texture import (ColorFit, TextureFit, fit_texture, fit_texture_from_images, fit_vertex_colors,
+from course.inverse import FitHistory, sphere_views
+from course.inverse.texture import (ColorFit, TextureFit, fit_texture, fit_texture_from_images, fit_vertex_colors,
                                 fit_vertex_colors_from_images, render_texture, render_vertex_colors,
                                 seen_texels, seen_vertices, smooth_vertex_colors)
-from course.losses import psnr
+from course.inverse.losses import psnr
 from course.mesh import Mesh
 from course.raster import rasterize
 
@@ -200,7 +200,7 @@ def test_bad_inputs_raise(known, teapot):
 
 
 def test_per_view_psnr_is_losses_psnr_of_render(texture_fit):
-    # the reported metric equals course.losses.psnr of render() images over the object pixels
+    # the reported metric equals course.inverse.losses.psnr of render() images over the object pixels
     mesh = models.teapot(dtype=torch.float64)
     held = sphere_views(16, size=SIZE, dtype=torch.float64)
     pred, target = render_texture(mesh, held, texture_fit.texture), render_texture(mesh, held)

@@ -1,12 +1,13 @@
-"""Tests of course.fit_views: learned views move, stay valid, ascend the loss; the fixed baseline does not move."""
+"""Tests of course.inverse.views: learned views move, stay valid, ascend the loss; the fixed baseline does not move."""
 import math
 
 import pytest
 import torch
 
-from course import losses, models
-from course.fit import FitHistory, circle_views, sphere_views
-from course.fit_views import (ViewFit, default_separation, fit_with_learned_views, ring_angles, separation_penalty,
+from course import models
+from course.inverse import losses
+from course.inverse import FitHistory, circle_views, sphere_views
+from course.inverse.views import (ViewFit, default_separation, fit_with_learned_views, ring_angles, separation_penalty,
                               view_camera, view_directions)
 from course.soft import soft_rasterize
 
@@ -171,7 +172,7 @@ def test_bad_target():
 # ------------------------------------------------------------------ view_objective="task": MVTN's scheme
 
 def test_surface_points_lie_on_the_surface_uniformly_by_area():
-    from course.fit_views import surface_points
+    from course.inverse.views import surface_points
     from course.mesh import Mesh
     # two triangles of area 1 and 3 in the plane z = 0: a quarter of the points in the first
     verts = torch.tensor([[0, 0, 0], [1, 0, 0], [0, 2, 0], [2, 0, 0], [5, 0, 0], [2, 2, 0]], dtype=torch.float64)
@@ -186,7 +187,7 @@ def test_surface_points_lie_on_the_surface_uniformly_by_area():
 
 
 def test_chamfer_distance_is_zero_on_itself_and_symmetric():
-    from course.fit_views import chamfer_distance
+    from course.inverse.views import chamfer_distance
     g = torch.Generator().manual_seed(0)
     a, b = torch.rand(50, 3, generator=g, dtype=torch.float64), torch.rand(70, 3, generator=g, dtype=torch.float64)
     assert float(chamfer_distance(a, a)) < 1e-15                                # cdist's rounding
@@ -208,8 +209,8 @@ def test_task_view_gradient_matches_finite_differences_of_the_look_ahead(float64
     """dT/dφ with T the chamfer distance of the shape after one silhouette step: the finite difference of two
     first derivatives against central differences of T itself (float64)."""
     torus = models.torus(0.8, 0.3, 24, 12)
-    from course.fit import start_verts
-    from course.fit_views import _silhouettes, _task_view_gradient, chamfer_distance, surface_points
+    from course.inverse import start_verts
+    from course.inverse.views import _silhouettes, _task_view_gradient, chamfer_distance, surface_points
     from course.mesh import Mesh
     base, faces = start_verts(models.icosphere(1, 0.5), 0)
     verts = base + 0.03 * torch.randn(base.shape, generator=torch.Generator().manual_seed(3), dtype=base.dtype)

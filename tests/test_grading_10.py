@@ -1,11 +1,12 @@
 """Lecture 10's graded tasks (course/grading/lecture10.py): the references agree with the package
-(course.losses.silhouette_iou_loss and smoothness_loss), they score full marks, a solution written as a student
+(course.inverse.losses.silhouette_iou_loss and smoothness_loss), they score full marks, a solution written as a student
 would scores full marks without calling them, typical mistakes lose points with the diagnosis a student can act
 on, and calling the package (or the grader's references) scores 0."""
 import pytest
 import torch
 
-from course import losses, models
+from course import models
+from course.inverse import losses
 from course.grading import lecture10, run_check, tasks_for_lecture
 from course.grading.lecture10 import silhouette_iou_loss_reference, smoothness_loss_reference
 from grading_contract import contract
@@ -244,7 +245,7 @@ CALLING_THE_PACKAGE = {
 @pytest.mark.parametrize("task_id", sorted(CALLING_THE_PACKAGE))
 def test_calling_the_package_scores_zero(task_id):
     result = run_check(task_id, CALLING_THE_PACKAGE[task_id])
-    assert result.points == 0 and "calls course.losses" in result.message, result.message
+    assert result.points == 0 and "calls course.inverse.losses" in result.message, result.message
 
 
 def fit_via_grading(render, target, pose0, steps):

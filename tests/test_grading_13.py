@@ -1,12 +1,12 @@
 """Lecture 13's graded tasks (course/grading/lecture13.py): the references agree with the package
-(course.learning.data.voxel_iou and view_cameras, course.losses.silhouette_iou_loss), they score full marks, a
+(course.learning.data.voxel_iou and view_cameras, course.inverse.losses.silhouette_iou_loss), they score full marks, a
 solution written as a student would scores full marks without calling them, typical mistakes lose points with
 the diagnosis a student can act on, and calling the package scores 0."""
 import math
 
 import torch
 
-from course import losses
+from course.inverse import losses
 from course.learning import data as shape_data, mvtn
 from course.grading import lecture13, run_check, tasks_for_lecture
 from grading_contract import contract

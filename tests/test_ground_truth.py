@@ -435,7 +435,7 @@ def test_float32_boundary_terms_match_float64(scene, method):
 
 def test_camera_fit_by_reynolds_in_float32_descends():
     """The float32 teapot fit by Reynolds used to climb (2.1e-3 → 2.8e-3)."""
-    from course.fit import camera_problem, fit_camera
+    from course.inverse import camera_problem, fit_camera
     mesh, colors, ref_cam, start, image = camera_problem(teapot(4, dtype=torch.float32), size=32)
     assert image.dtype == torch.float32
     fit = fit_camera(mesh, image, start, method="reynolds", steps=15, face_colors=colors, reference_camera=ref_cam,

@@ -6,7 +6,7 @@ import torch
 from course.learning.reconstruction import (MeshReconstructor, ReconstructionSettings, batched_smoothness, evaluate_reconstruction,
                           load_pretrained_reconstructor, load_reconstructor, reconstruction_loss, retrieve,
                           save_reconstructor, shape_scores, train_reconstructor, train_step)
-from course.losses import smoothness_loss
+from course.inverse.losses import smoothness_loss
 from course.mesh import Mesh
 from course.learning.data import make_dataset
 

@@ -1,4 +1,4 @@
-"""Tests for course.losses: each loss against hand-computed values on tiny inputs, gradcheck in float64,
+"""Tests for course.inverse.losses: each loss against hand-computed values on tiny inputs, gradcheck in float64,
 finite values and gradients for empty silhouettes and degenerate faces, and clear errors for bad inputs."""
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from course.losses import (edge_length_loss, interior_edges, iou, l1_loss, l2_loss, laplacian_loss, psnr,
+from course.inverse.losses import (edge_length_loss, interior_edges, iou, l1_loss, l2_loss, laplacian_loss, psnr,
                            silhouette_iou_loss, smoothness_loss)
 from course.mesh import Mesh
 from course.models import cube, icosphere, plane

@@ -1,14 +1,14 @@
-"""3D metrics of a fitted mesh (course.shape_metrics) and Large Steps (course.large_steps)."""
+"""3D metrics of a fitted mesh (course.inverse.metrics) and Large Steps (course.inverse.large_steps)."""
 import math
 
 import pytest
 import torch
 
 from course import models
-from course.fit import fit_silhouettes, sphere_views
-from course.large_steps import Parameterization, UniformAdam, laplacian
+from course.inverse import fit_silhouettes, sphere_views
+from course.inverse.large_steps import Parameterization, UniformAdam, laplacian
 from course.mesh import Mesh
-from course.shape_metrics import chamfer_distance, normal_consistency, sample_surface, shape_metrics
+from course.inverse.metrics import chamfer_distance, normal_consistency, sample_surface, shape_metrics
 
 
 def _expected_offset_chamfer(d):
@@ -36,7 +36,7 @@ def test_chamfer_of_concentric_and_offset_spheres():
 def test_the_grid_search_finds_exactly_the_brute_forces_nearest_samples():
     """Surfaces near each other, far apart, crossing, of different sizes, and point sets with exact ties (a
     lattice and its copy): the same indices (the first of equals) and distances as comparing every pair."""
-    from course.shape_metrics import _nearest, _nearest_brute
+    from course.inverse.metrics import _nearest, _nearest_brute
     g = torch.Generator().manual_seed(3)
     sphere, _ = sample_surface(models.icosphere(3, 1.0, dtype=torch.float64), 1500, g)
     teapot, _ = sample_surface(models.teapot(3), 1500, g)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from course.fit import circle_views
+from course.inverse import circle_views
 from course.mesh import Mesh
 from course.models import cube, icosphere
 from course.raster import rasterize

@@ -13,7 +13,7 @@ from PIL import Image  # noqa: E402
 from course import models, viz  # noqa: E402
 from course.viz import fit as viz_fit  # noqa: E402
 from course.camera import Camera  # noqa: E402
-from course.fit import FitHistory, fit_silhouettes, sphere_views  # noqa: E402
+from course.inverse import FitHistory, fit_silhouettes, sphere_views  # noqa: E402
 from course.shading import linear_to_srgb  # noqa: E402
 
 

@@ -4,23 +4,23 @@
 Each application of lecture 10 is fitted once, with its entry point's defaults and seed 0, and reported as
 steps, wall time and the final metric on held-out views next to its start value and the issue's target:
 
-* **mesh**: ``course.fit.fit_mesh_from_silhouettes(teapot, n_views=8)``, a sphere deformed to the teapot's
+* **mesh**: ``course.inverse.fit_mesh_from_silhouettes(teapot, n_views=8)``, a sphere deformed to the teapot's
   silhouettes, again with the regulariser off (``smoothness=0``) to show what it is for, and with Nicolet et
   al.'s Large Steps (``optimizer="large_steps"``, λ = 5, no regulariser). Metrics: the held-out IoU, target
-  >= 0.90; the fitted mesh's self-intersections (``course.fit.self_intersections``, pairs of faces that cross
-  each other; the start sphere has none), target 0; and in 3D against the teapot (``course.shape_metrics``,
+  >= 0.90; the fitted mesh's self-intersections (``course.inverse.self_intersections``, pairs of faces that cross
+  each other; the start sphere has none), target 0; and in 3D against the teapot (``course.inverse.metrics``,
   20,000 samples a side): the Chamfer distance in percent of the bounding-box diagonal (target <= 0.5 %) and
   the normal consistency (target >= 0.93).
-* **images**: ``course.fit.fit_mesh_from_images(teapot)`` (12 shaded views at 64², the visual hull carved from
+* **images**: ``course.inverse.fit_mesh_from_images(teapot)`` (12 shaded views at 64², the visual hull carved from
   their masks, then 150 steps of soft rasterization with Large Steps), and one change at a time
   (``IMAGE_FITS``): Adam on vertex offsets in place of Large Steps (same steps), with Kato et al.'s smoothness
   loss and without a regulariser; the sphere in place of the hull (300 steps); and both gradients for 20 steps,
   soft and ``"reynolds"`` (the exact box-filtered image and lecture 09's boundary gradient, too slow per step
   for the full budget here). Metrics: the held-out IoU, target >= 0.96; the held-out PSNR of the shaded images
   (30 dB, as for textures); and the three 3D metrics above, each row's start being its fit's start.
-* **camera**: ``course.fit.fit_camera`` on ``course.fit.camera_problem()`` (the teapot, flat-shaded by a light
+* **camera**: ``course.inverse.fit_camera`` on ``course.inverse.camera_problem()`` (the teapot, flat-shaded by a light
   fixed in the world, seen from a reference camera; the start 30° away about the world's vertical axis, not
-  the view axis), once per gradient in ``course.fit.CAMERA_METHODS`` (read at run time, so a new method joins
+  the view axis), once per gradient in ``course.inverse.CAMERA_METHODS`` (read at run time, so a new method joins
   by itself), each with ``fit_camera``'s defaults (soft and NMR search 7 starts; a row's start is
   ``camera_problem``'s); then the course's full pipeline as the reference, ``render()`` of the textured,
   Phong-lit teapot (``camera_problem(textured=True)``, the start orbited 45° about the world's x axis,
@@ -31,18 +31,18 @@ steps, wall time and the final metric on held-out views next to its start value 
   six starts 20° away about different axes (``START_AXES``), for NMR, soft rasterization, soft rasterization at
   the pixel centres only (``supersample=1``) and Reynolds: the median rotation error at step 20 (the row's
   start) and 40, and how many starts end within 3°.
-* **texture**: ``course.fit_texture.fit_texture_from_images`` (the teapot's checker texture), and
+* **texture**: ``course.inverse.texture.fit_texture_from_images`` (the teapot's checker texture), and
   ``fit_vertex_colors_from_images`` against the same checker (vertex colours can only blur its edges: below
   the target by design) and against a smooth vertex-coloured target (``smooth_vertex_colors(teapot, 0)``).
   Metric: the held-out PSNR, target >= 30 dB.
-* **views**: ``course.fit_views.fit_with_learned_views(teapot)``, the views fixed on the ring
+* **views**: ``course.inverse.views.fit_with_learned_views(teapot)``, the views fixed on the ring
   (``learn_views=False``) and learned (``True``). Metric: the held-out IoU, target >= 0.90.
 * **batch**: what a fit's step renders, the views one by one against one call for all of them (a camera batch),
   side by side in the same run (``timing.time_side_by_side``, the median of ``BATCH_REPEAT`` runs after a warm-up),
   on the teapot from ``sphere_views(N, offset=1.9)`` as the fits see it, for 12 views at 64² (the mesh from
   images) and 8 views at 32²: soft silhouettes with their gradient (σ = 3e-4, ``fit_silhouettes``' start),
   soft colours with their gradient (σ = 3e-5, γ = 1e-2, ``fit_mesh_from_images``), the exact image with
-  the colours' gradient (``exact_coverage``, as ``fit._reynolds_backward`` draws it) and the Reynolds gradient
+  the colours' gradient (``exact_coverage``, as ``inverse.shaded._reynolds_backward`` draws it) and the Reynolds gradient
   of the vertices (``image_gradient``). Two rows per case: the time in ms, one by one → batched (met when the
   batch is no slower), and the speed-up (one by one / batched); "steps" is the number of views, "time (s)"
   the whole measurement. ``--fast``: 4 views at 16² of ``teapot(3)``, one timed run.
@@ -60,7 +60,8 @@ import time
 
 import torch
 
-from .. import fit, fit_texture, fit_views, models, shape_metrics
+from .. import inverse as fit, models
+from ..inverse import metrics as shape_metrics, texture as fit_texture, views as fit_views
 from ..mesh import Mesh
 
 __all__ = ["APPLICATIONS", "bench_fit", "save_fit_picture", "format_table", "add_arguments", "run"]

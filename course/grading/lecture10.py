@@ -20,7 +20,7 @@ The tasks are the pieces of every fit in lecture 10 (Kato, Ushiku and Harada, CV
   intervals where it jumps and the widest flat run; graded on the grader's hard and soft losses.
 
 The references are written here from these formulas, in float64; ``tests/test_grading_10.py`` checks that
-they agree with ``course.losses.silhouette_iou_loss`` and ``course.losses.smoothness_loss``. They are public so that those tests (and a curious student) can read them; a graded
+they agree with ``course.inverse.losses.silhouette_iou_loss`` and ``course.inverse.losses.smoothness_loss``. They are public so that those tests (and a curious student) can read them; a graded
 function that calls them, or the package functions doing the task's work, scores 0.
 """
 from __future__ import annotations
@@ -34,11 +34,11 @@ from .registry import forbidden_call, task
 
 __all__ = ["silhouette_iou_loss_reference", "smoothness_loss_reference", "fit_pose_reference", "staircase_reference"]
 
-FORBIDDEN = [("course.losses", "silhouette_iou_loss"), ("course.losses", "smoothness_loss"),
-             ("course.losses", "interior_edges"), ("course.fit", "fit_silhouettes"),
+FORBIDDEN = [("course.inverse.losses", "silhouette_iou_loss"), ("course.inverse.losses", "smoothness_loss"),
+             ("course.inverse.losses", "interior_edges"), ("course.inverse.silhouettes", "fit_silhouettes"),
              ("course.grading.lecture10", "silhouette_iou_loss_reference"),
              ("course.grading.lecture10", "smoothness_loss_reference"),
-             ("course.grading.lecture10", "fit_pose_reference"), ("course.fit", "fit_camera"),
+             ("course.grading.lecture10", "fit_pose_reference"), ("course.inverse.pose", "fit_camera"),
              ("course.grading.lecture10", "staircase_reference")]
 
 
@@ -159,7 +159,7 @@ def _match(got, variants, tol=1e-6):
     return None
 
 
-@task("10.1", "silhouette_iou_loss", points=2, reference=("course.losses", "silhouette_iou_loss"))
+@task("10.1", "silhouette_iou_loss", points=2, reference=("course.inverse.losses", "silhouette_iou_loss"))
 def _check_silhouette_iou_loss(impl):
     forbidden = forbidden_call(impl, "silhouette_iou_loss", FORBIDDEN)
     if forbidden:
@@ -354,7 +354,7 @@ def _smoothness_problem(impl, verts, faces, label, gradient=True) -> str | None:
     return None if bad is None else f"{bad} (the value is right; is part of the expression detached?)"
 
 
-@task("10.2", "smoothness_loss", points=3, reference=("course.losses", "smoothness_loss"))
+@task("10.2", "smoothness_loss", points=3, reference=("course.inverse.losses", "smoothness_loss"))
 def _check_smoothness_loss(impl):
     forbidden = forbidden_call(impl, "smoothness_loss", FORBIDDEN)
     if forbidden:

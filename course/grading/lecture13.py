@@ -28,7 +28,7 @@ from .registry import forbidden_call, task
 
 __all__ = ["voxel_iou_reference", "multiview_iou_loss_reference", "view_eyes_reference", "train_step_reference"]
 
-FORBIDDEN = [("course.learning.data", "voxel_iou"), ("course.losses", "silhouette_iou_loss"),
+FORBIDDEN = [("course.learning.data", "voxel_iou"), ("course.inverse.losses", "silhouette_iou_loss"),
              ("course.learning.mvtn", "view_directions"),
              ("course.grading.lecture13", "voxel_iou_reference"),
              ("course.grading.lecture13", "multiview_iou_loss_reference"),

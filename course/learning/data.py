@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from ..camera import Camera
-from ..fit import shaded_face_colors
+from ..inverse.shaded import shaded_face_colors
 from ..mesh import Mesh
 from ..raster import rasterize
 from .shapes import FAMILIES, aspect_ratio, make_shape

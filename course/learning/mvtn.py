@@ -42,7 +42,7 @@ import torch
 
 from ..camera import Camera, intrinsics_from_fov, look_at
 from .data import make_dataset
-from ..shape_metrics import sample_surface
+from ..inverse.metrics import sample_surface
 from .shapes import FAMILIES
 from ..soft import soft_rasterize
 from ..tensors import _check_count, _check_real

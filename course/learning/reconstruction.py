@@ -35,11 +35,11 @@ from pathlib import Path
 
 import torch
 
-from ..losses import interior_edges, silhouette_iou_loss
+from ..inverse.losses import interior_edges, silhouette_iou_loss
 from ..mesh import Mesh
 from ..models import icosphere
 from .data import voxel_iou, voxelize
-from ..shape_metrics import chamfer_distance
+from ..inverse.metrics import chamfer_distance
 from ..soft import soft_rasterize
 from ..tensors import _check_count, _check_real
 

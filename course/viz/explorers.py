@@ -626,7 +626,7 @@ SIGMAS = [1e-5, 1e-4, 1e-3]
 def _pose_problem():
     """Lecture 10's camera fit reduced to one angle: the teapot seen by the reference camera orbited by φ about
     world +y; the target is φ = 0, the start 30°. Returns (mesh, colours, reference camera, target image)."""
-    from ..fit import camera_problem
+    from ..inverse.pose import camera_problem
     from ..models import teapot
     mesh, colors, reference, _, target = camera_problem(teapot(3, dtype=F64), size=32)
     return mesh, colors, reference, target

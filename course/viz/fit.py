@@ -1,7 +1,7 @@
 """Figures and animations of fits (lecture 10): loss curves, the frames of a fit, GIFs, target | start | result.
 
-Every loop of ``course.fit`` (and of the texture and multi-view fits) returns a result whose ``.history`` is a
-``course.fit.FitHistory``: the loss at every step, named per-step ``metrics``, and ``snapshots`` taken at
+Every loop of ``course.inverse`` (and of the texture and multi-view fits) returns a result whose ``.history`` is a
+``course.inverse.FitHistory``: the loss at every step, named per-step ``metrics``, and ``snapshots`` taken at
 ``snapshot_steps``. What a snapshot holds depends on the fit:
 
 * rendered images, (H, W) silhouettes in [0, 1] or (H, W, C) linear colours (a camera fit);
@@ -44,7 +44,7 @@ def _history(history):
     """The FitHistory of ``history``, or of a fit result (anything with ``.history``)."""
     h = getattr(history, "history", history)
     if not all(hasattr(h, name) for name in ("loss", "snapshot_steps", "snapshots", "metrics")):
-        raise ValueError("expected a FitHistory (course.fit) or a fit result with .history, "
+        raise ValueError("expected a FitHistory (course.inverse) or a fit result with .history, "
                          f"got {type(history).__name__}")
     return h
 

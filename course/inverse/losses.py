@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import torch
 
-from .mesh import Mesh, _safe_normalize
-from .tensors import _as_faces, _check_real, as_tensor
+from ..mesh import Mesh, _safe_normalize
+from ..tensors import _as_faces, _check_real, as_tensor
 
 __all__ = ["silhouette_iou_loss", "iou", "interior_edges", "smoothness_loss", "laplacian_loss",
            "edge_length_loss", "l1_loss", "l2_loss", "psnr"]

@@ -51,7 +51,7 @@ class Parameterization:
     """u = (I + λ L) v for the vertices of a mesh (welded positions), Cholesky-factored once."""
 
     def __init__(self, verts, faces, lam: float = 20.0):
-        from .boundary import _weld
+        from ..boundary import _weld
         verts = torch.as_tensor(verts).detach().double()
         faces = torch.as_tensor(faces).long()
         if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not lam >= 0:

@@ -43,7 +43,7 @@ a smooth vertex-coloured target (``smooth_vertex_colors``) is fitted almost exac
 vertex colours on a vertex-coloured target, and from 12.4 to a plateau of 16.5 dB (reached by step 30)
 for vertex colours on the textured teapot.
 
-The metric is ``course.losses.psnr`` per held-out view over the pixels that show the object (the
+The metric is ``course.inverse.losses.psnr`` per held-out view over the pixels that show the object (the
 geometry is known, so target and result cover the same pixels), averaged over views in dB.
 """
 from __future__ import annotations
@@ -53,14 +53,15 @@ from dataclasses import dataclass
 
 import torch
 
-from . import losses, models
-from .camera import Camera
-from .fit import FitHistory, _progress, _snap_due, sphere_views
-from .mesh import Mesh
-from .raster import interpolate, rasterize
-from .render import RenderSettings, Scene, render
-from .tensors import _check_count, _check_real, as_tensor
-from .textures import sample_texture
+from .. import models
+from . import losses
+from ..camera import Camera
+from .common import FitHistory, _progress, _snap_due, sphere_views
+from ..mesh import Mesh
+from ..raster import interpolate, rasterize
+from ..render import RenderSettings, Scene, render
+from ..tensors import _check_count, _check_real, as_tensor
+from ..textures import sample_texture
 
 __all__ = ["TextureFit", "ColorFit", "fit_texture", "fit_vertex_colors", "fit_texture_from_images",
            "fit_vertex_colors_from_images", "smooth_vertex_colors", "render_texture", "render_vertex_colors",

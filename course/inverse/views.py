@@ -1,6 +1,6 @@
 """Silhouette fitting with learned views (lecture 10): where should the cameras look?
 
-``course.fit.fit_silhouettes`` fits a sphere to a target's silhouettes from cameras fixed in advance,
+``course.inverse.fit_silhouettes`` fits a sphere to a target's silhouettes from cameras fixed in advance,
 usually a ring (``circle_views``: 8 views alternating ±25° of elevation). The ring never looks from above
 or below, so whatever only shows there (a teapot's lid, a torus's hole) is never corrected. MVTN (Hamdi,
 Giancola and Ghanem 2021, "MVTN: Multi-View Transformation Network for 3D Shape Recognition") makes the
@@ -88,12 +88,13 @@ from dataclasses import dataclass
 
 import torch
 
-from . import losses, models
-from .camera import Camera, intrinsics_from_fov, look_at
-from .fit import FitHistory, _check_common, _progress, _snap_due, held_out_iou, sphere_views, start_verts
-from .mesh import Mesh
-from .soft import soft_rasterize
-from .tensors import _check_count, _check_dtype, _check_finite, _check_real, as_tensor
+from .. import models
+from . import losses
+from ..camera import Camera, intrinsics_from_fov, look_at
+from .common import FitHistory, _check_common, _progress, _snap_due, held_out_iou, sphere_views, start_verts
+from ..mesh import Mesh
+from ..soft import soft_rasterize
+from ..tensors import _check_count, _check_dtype, _check_finite, _check_real, as_tensor
 
 __all__ = ["ViewFit", "view_camera", "ring_angles", "view_directions", "separation_penalty", "default_separation",
            "surface_points", "chamfer_distance", "fit_with_learned_views"]
@@ -156,7 +157,7 @@ def view_camera(azimuth, elevation, *, distance: float = 3.0, size: int = 64, fo
 def ring_angles(n: int, *, elevations=(25.0, -25.0), dtype=torch.float64, device=None) -> torch.Tensor:
     """(n, 2) radians: the (azimuth, elevation) of ``fit.circle_views(n)``, azimuths 360°/n apart, elevations
     taking turns from ``elevations`` (degrees). The start (and, unlearned, the whole run) of the views."""
-    from .fit import _check_elevations
+    from .common import _check_elevations
     n, dtype = _check_count(n, "n"), _check_dtype(dtype)
     elevations = _check_elevations(elevations)
     k = torch.arange(n, dtype=dtype, device=device)

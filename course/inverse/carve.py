@@ -33,9 +33,9 @@ import math
 import torch
 import torch.nn.functional as F
 
-from .camera import Camera
-from .mesh import Mesh
-from .tensors import _check_count, _check_real
+from ..camera import Camera
+from ..mesh import Mesh
+from ..tensors import _check_count, _check_real
 
 __all__ = ["hull_field", "surface_nets", "relax", "carve", "view_radius"]
 

@@ -24,7 +24,7 @@ import math
 
 import torch
 
-from .tensors import _check_count
+from ..tensors import _check_count
 
 __all__ = ["sample_surface", "chamfer_distance", "normal_consistency", "shape_metrics"]
 
@@ -193,7 +193,7 @@ def normal_consistency(pred, target, *, samples: int = 20000, seed: int = 0) -> 
 def shape_metrics(pred, target, *, samples: int = 20000, seed: int = 0) -> dict:
     """``chamfer`` (fraction of the target's diagonal), ``normal_consistency`` and ``self_intersections`` (pairs
     of faces of ``pred`` that cross each other), from one set of samples."""
-    from .fit import self_intersections
+    from .common import self_intersections
     chamfer, normals = _metrics(pred, target, samples, seed)
     return dict(chamfer=chamfer, normal_consistency=normals,
                 self_intersections=int(self_intersections(pred).shape[0]))
