@@ -81,7 +81,7 @@ def test_fast_starts_rows():
     check_rows(rows)
     assert [r["method"] for r in rows[::2]] == list(fb.START_VARIANTS)
     assert all(r["unit"] == "deg" and r["start"] >= 0 for r in rows[::2])
-    assert all(r["unit"] == "of 6" and 0 <= r["final"] <= 6 for r in rows[1::2])
+    assert all(r["unit"] == "of 2" and 0 <= r["final"] <= 2 for r in rows[1::2])             # --fast: two starts
 
 
 def test_fast_images_rows_and_picture(tmp_path):
