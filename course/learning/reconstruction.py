@@ -88,11 +88,7 @@ class MeshReconstructor(torch.nn.Module):
         V, code = template.num_verts, _check_count(settings.code, "code")
         with torch.random.fork_rng(devices=[]):                        # seeded weights, global state restored
             torch.manual_seed(_check_count(settings.seed, "seed", minimum=0))
-            self.encoder = torch.nn.Sequential(
-                torch.nn.Conv2d(3, 16, 3, stride=2, padding=1), torch.nn.ReLU(),   # (B, 16, H/2, W/2)
-                torch.nn.Conv2d(16, 32, 3, stride=2, padding=1), torch.nn.ReLU(),  # (B, 32, H/4, W/4)
-                torch.nn.Conv2d(32, 64, 3, stride=2, padding=1), torch.nn.ReLU(),  # (B, 64, H/8, W/8)
-                torch.nn.Flatten(), torch.nn.Linear(64 * (size // 8) ** 2, code), torch.nn.ReLU())  # (B, code)
+            self.encoder = image_encoder(size, code)
             self.offsets = torch.nn.Linear(code, V * 3)
             self.log_scale = torch.nn.Linear(code, 3)
             self.translation = torch.nn.Linear(code, 3)
@@ -111,6 +107,17 @@ class MeshReconstructor(torch.nn.Module):
         offsets = self.offsets(code).view(B, -1, 3)                   # (B, V, 3)
         scale = torch.exp(self.log_scale(code))[:, None]              # (B, 1, 3) per axis, positive
         return (self.template + offsets) * scale + self.translation(code)[:, None]
+
+
+def image_encoder(size: int, code: int) -> torch.nn.Sequential:
+    """(B, 3, H, W) images, H = W = ``size`` (a multiple of 8) → (B, ``code``): three stride-2 3 × 3 convolutions
+    (16, 32, 64 channels, ReLU), then a linear layer and a ReLU. The mesh and the voxel networks read their
+    images with the same encoder, so a difference between them is their decoders'."""
+    return torch.nn.Sequential(
+        torch.nn.Conv2d(3, 16, 3, stride=2, padding=1), torch.nn.ReLU(),            # (B, 16, H/2, W/2)
+        torch.nn.Conv2d(16, 32, 3, stride=2, padding=1), torch.nn.ReLU(),           # (B, 32, H/4, W/4)
+        torch.nn.Conv2d(32, 64, 3, stride=2, padding=1), torch.nn.ReLU(),           # (B, 64, H/8, W/8)
+        torch.nn.Flatten(), torch.nn.Linear(64 * (size // 8) ** 2, code), torch.nn.ReLU())  # (B, code)
 
 
 def reconstruction_loss(verts: torch.Tensor, faces: torch.Tensor, cameras, targets: torch.Tensor, *,
@@ -179,8 +186,10 @@ def train_step(model: MeshReconstructor, optimizer: torch.optim.Optimizer, image
 
 def train_reconstructor(train, *, settings: ReconstructionSettings = ReconstructionSettings(), steps: int = 1500,
                         batch: int = 16, views: int = 2, lr: float = 2e-3, final_sigma: float | None = None,
-                        seed: int = 0, model=None, progress: bool = False) -> tuple[MeshReconstructor, list]:
-    """(model, losses per step): Adam on ``reconstruction_loss`` over the ShapeSet ``train``; input view 0.
+                        seed: int = 0, model=None, input_views: str = "first",
+                        progress: bool = False) -> tuple[MeshReconstructor, list]:
+    """(model, losses per step): Adam on ``reconstruction_loss`` over the ShapeSet ``train``; the input image is
+    view 0 of each shape (``input_views="first"``) or any of its views ("all": ``training_batches``).
 
     Each step draws ``batch`` shapes (an epoch's shuffled order, then the next) and for each shape ``views``
     distinct views of the dataset's Nv at random, its own pair: a network that sees 8 views of every shape two
@@ -195,12 +204,8 @@ def train_reconstructor(train, *, settings: ReconstructionSettings = Reconstruct
     state is untouched.
     model: continue training this one (its own settings then apply). progress: a tqdm bar with the loss.
     """
-    steps, batch = _check_count(steps, "steps", minimum=0), _check_count(batch, "batch")
+    steps = _check_count(steps, "steps", minimum=0)
     lr = _check_real(lr, "lr", low=0, low_open=True)
-    N, Nv = train.silhouettes.shape[:2]
-    views = _check_count(views, "views")
-    if views > Nv:
-        raise ValueError(f"views must be at most the dataset's {Nv} views, got {views}")
     if train.images.shape[2:4] != (settings.size, settings.size) and model is None:
         raise ValueError(f"the dataset's images are {tuple(train.images.shape[2:4])}, the network reads "
                          f"{settings.size} x {settings.size}")
@@ -210,23 +215,57 @@ def train_reconstructor(train, *, settings: ReconstructionSettings = Reconstruct
                                                                        low_open=True)
     optimizer = torch.optim.Adam(model.parameters(), lr=lr)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(steps, 1), eta_min=lr / 20)
-    g = torch.Generator().manual_seed(_check_count(seed, "seed", minimum=0))
-    order, losses = torch.empty(0, dtype=torch.long), []
+    losses = []
     from tqdm.auto import tqdm
     disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
-    bar = tqdm(range(steps), desc="train reconstructor", disable=disable, leave=False)
-    for step in bar:
+    batches = training_batches(train, steps=steps, batch=batch, views=views, input_views=input_views, seed=seed)
+    bar = tqdm(batches, total=steps, desc="train reconstructor", disable=disable, leave=False)
+    for step, (idx, inputs, pick) in enumerate(bar):
         sigma = sigma0 * (final_sigma / sigma0) ** (step / max(steps - 1, 1))  # geometric, σ0 → final
-        while order.numel() < batch:                                   # the next shapes of shuffled epochs
-            order = torch.cat([order, torch.randperm(N, generator=g)])
-        idx, order = order[:batch], order[batch:]
-        pick = torch.rand(batch, Nv, generator=g).argsort(1)[:, :views]  # (B, views) distinct views per shape
         cameras = [[train.cameras[int(v)] for v in row] for row in pick]
         targets = train.silhouettes[idx[:, None], pick]                # (B, views, H, W)
-        losses.append(train_step(model, optimizer, train.images[idx, 0], targets, cameras, sigma))
+        losses.append(train_step(model, optimizer, train.images[idx, inputs], targets, cameras, sigma))
         schedule.step()
         bar.set_postfix(loss=f"{losses[-1]:.3f}", refresh=False)
     return model.eval(), losses
+
+
+INPUT_VIEWS = ("first", "all")
+
+
+def training_batches(train, *, steps: int, batch: int, views: int, input_views: str = "first", seed: int = 0):
+    """An iterator over ``steps`` batches (idx (B,), inputs (B,), pick (B, views)): which shapes, which of their views is the
+    input image and which views' silhouettes supervise, drawn by a private generator seeded by ``seed``.
+
+    Shapes come in the shuffled order of one epoch after another. input_views "first": the input is view 0
+    of every shape, the supervising views ``views`` distinct views of the dataset's Nv (view 0 among them or
+    not); "all": ``views + 1`` distinct views, the first the input and the others the supervision, so every
+    view serves as an input and a shape is never supervised by the view it was shown from.
+    """
+    steps, batch = _check_count(steps, "steps", minimum=0), _check_count(batch, "batch")
+    if input_views not in INPUT_VIEWS:
+        raise ValueError(f"input_views must be one of {INPUT_VIEWS}, got {input_views!r}")
+    N, Nv = train.silhouettes.shape[:2]
+    views = _check_count(views, "views")
+    drawn = views + (input_views == "all")
+    if drawn > Nv:
+        raise ValueError(f"views must be at most the dataset's {Nv - (input_views == 'all')} views "
+                         f"(input_views={input_views!r}), got {views}")
+    return _batches(N, Nv, steps, batch, drawn, input_views == "first",
+                    torch.Generator().manual_seed(_check_count(seed, "seed", minimum=0)))
+
+
+def _batches(N, Nv, steps, batch, drawn, first, g):
+    order = torch.empty(0, dtype=torch.long)
+    for _ in range(steps):
+        while order.numel() < batch:                                   # the next shapes of shuffled epochs
+            order = torch.cat([order, torch.randperm(N, generator=g)])
+        idx, order = order[:batch], order[batch:]
+        pick = torch.rand(batch, Nv, generator=g).argsort(1)[:, :drawn]  # (B, drawn) distinct views per shape
+        if first:
+            yield idx, torch.zeros(batch, dtype=torch.long), pick
+        else:
+            yield idx, pick[:, 0], pick[:, 1:]
 
 
 # ---- evaluation --------------------------------------------------------------------------------------------
