@@ -73,6 +73,35 @@ def test_bvh_depth_and_finite_difference_agree_with_their_sources():
     assert E._fd_estimate(-5.0, E.F64) == pytest.approx(E._fd_exact(), rel=1e-8)
 
 
+@pytest.mark.parametrize("draw, values", [(E.draw_supersampling, dict(k=3, jitter=True)),
+                                           (E.draw_area_light, dict(size=0.5, samples=2)),
+                                           (E.draw_soft, dict(log_sigma=-3.0, log_gamma=-1.0))])
+def test_lectures_05_07_08_figures_carry_the_line_of_their_current_values(draw, values):
+    for kwargs in ({}, values):                                             # the defaults, then moved controls
+        out = draw(**kwargs)
+        texts = [t.get_text().replace("\n", " ") for t in plt.gcf().texts]
+        assert out["line"] in texts, (kwargs, texts)
+        plt.close("all")
+
+
+def test_lectures_05_07_08_colour_scales_and_legends():
+    E.draw_supersampling()                                                  # coverage 0..1 on a colour map
+    coverage, error = plt.gcf().axes[0].images[0], plt.gcf().axes[2].images[0]
+    assert coverage.get_clim() == (0, 1) and coverage.get_cmap().name == "viridis"
+    assert len(plt.gcf().axes) == 6 and error.get_clim()[0] == -error.get_clim()[1]   # a colour bar each
+    plt.close("all")
+    E.draw_area_light()                                                     # no surface: its own colour
+    ax = plt.gcf().axes[0]
+    assert ax.get_legend().get_texts()[0].get_text() == "no surface" and len(plt.gcf().axes) == 2
+    plt.close("all")
+    out = E.draw_soft()                                                     # clipped at a percentile
+    lim = plt.gcf().axes[1].images[0].get_clim()[1]
+    assert out["reach"] == pytest.approx(44 / 576) and 0.1 < lim < 1.0
+    plt.close("all")
+    assert E.draw_soft(log_gamma=-4.0)["reach"] == 0.0                      # round-off is not a gradient
+    plt.close("all")
+
+
 @pytest.mark.parametrize("draw, values, words", [
     (E.draw_fill_rule, dict(x=-1.0), "x must be a number in [0.0, 8]"),
     (E.draw_supersampling, dict(shape="cube"), "shape must be one of ['sliver', 'teapot']"),

@@ -18,6 +18,7 @@ from functools import cache
 
 import matplotlib
 import matplotlib.collections
+import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
@@ -158,9 +159,12 @@ def draw_supersampling(k: int = 2, jitter: bool = False, shape: str = "sliver") 
     """k × k samples per pixel, on a regular grid or jittered (one random sample per stratum), against the
     exact coverage of each pixel (``coverage.exact_coverage``), on a 0.4-px sliver or the teapot's outline.
 
-    Look at the error image (red: too bright, blue: too dark): with a regular grid the sliver breaks into
+    The coverage panels share one colour scale from 0 (dark) to 1 (yellow), so the sliver's faint pixels
+    (at most 0.36 covered) stand out from the empty ones. Look at the error image (estimate - exact; red:
+    too bright, blue: too dark, its colour bar in coverage units): with a regular grid the sliver breaks into
     pieces until k is large, and the error sits in runs along the edges (aliasing); jitter turns the runs
     into noise of the same size. The RMS error falls roughly like 1/k for both (edges are what is left).
+    The line printed under the figure is the one the explorer cell prints for its defaults.
     """
     from ..antialias import supersample
     k = int(_check_range("k", k, 1, 16))
@@ -171,13 +175,19 @@ def draw_supersampling(k: int = 2, jitter: bool = False, shape: str = "sliver") 
     image = supersample(mesh, camera, colors, k, jitter=jitter)[..., 0]     # (H, W) coverage estimate
     error = image - exact
     rmse = float(error.pow(2).mean().sqrt())
-    H, W = exact.shape
-    fig, axes = plt.subplots(1, 3, figsize=(9.0, 3.2 if shape == "teapot" else 1.7))
-    show_image(image, f"{k} × {k} {'jittered' if jitter else 'regular'}", ax=axes[0], cmap="gray", vmin=0, vmax=1)
-    show_image(exact, "exact coverage", ax=axes[1], cmap="gray", vmin=0, vmax=1)
-    signed_image(error, f"error, RMS {_sig(rmse)}", ax=axes[2])
-    fig.tight_layout()
     line = f"{shape}, {k} x {k} {'jittered' if jitter else 'regular'}: RMS error against exact coverage {_r4(rmse)}"
+    sliver = shape == "sliver"                                              # 32 x 10 px: one panel a row
+    fig, axes = plt.subplots(3, 1, figsize=(7.0, 6.4)) if sliver else plt.subplots(1, 3, figsize=(10.5, 3.1))
+    name = f"{k} × {k} = {k * k} samples, {'jittered' if jitter else 'regular'}"
+    for ax, values, title in [(axes[0], image, name), (axes[1], exact, "exact coverage")]:
+        show_image(values, ax=ax, cmap="viridis", vmin=0, vmax=1)
+        ax.set_title(title, fontsize=10)
+        fig.colorbar(ax.images[0], ax=ax, fraction=0.046, pad=0.03, label="coverage")
+    signed_image(error, ax=axes[2])
+    axes[2].set_title(f"error, RMS {_sig(rmse)}", fontsize=10)
+    fig.colorbar(axes[2].images[0], ax=axes[2], fraction=0.046, pad=0.03, label="estimate - exact")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.tight_layout(rect=(0, 0.05 if sliver else 0.08, 1, 1))
     return dict(rmse=rmse, line=line)
 
 
@@ -341,13 +351,17 @@ def bvh_explorer() -> None:
     _show(draw_bvh)
 
 
+_NO_SURFACE = "#9ecae1"                                                     # pale blue: camera rays that hit nothing
+
+
 def draw_area_light(size: float = 1.0, samples: int = 4) -> dict:
     """Soft shadows of a square area light of side ``size`` above the world of lecture 07, estimated with
     ``samples`` × ``samples`` stratified shadow rays per pixel.
 
     A point light (size 0) casts hard shadows; the larger the light, the wider the penumbra, where the
     fraction of the light a point sees falls from 1 to 0. Few samples give a noisy penumbra (steps of
-    1 / samples²); more samples smooth it at a proportional cost.
+    1 / samples²); more samples smooth it at a proportional cost. White is fully lit, black the umbra (no
+    shadow ray reaches the light), pale blue the pixels whose camera ray meets no surface.
     """
     from ..raytrace import rectangle_light_samples, visible
     size = _check_range("size", size, 0.0, 3.0)
@@ -363,16 +377,24 @@ def draw_area_light(size: float = 1.0, samples: int = 4) -> dict:
     ex, ez = torch.tensor([2 * half, 0.0, 0.0], dtype=F64), torch.tensor([0.0, 0.0, 2 * half], dtype=F64)
     light = rectangle_light_samples(centre - ex / 2 - ez / 2, ex, ez, points.shape[0], samples, seed=0)
     frac = visible(points, light, bvh, normals=normals).double()           # (P,) in [0, 1]
-    image = torch.zeros(RT_SIZE * RT_SIZE, dtype=F64)
+    image = torch.full((RT_SIZE * RT_SIZE,), math.nan, dtype=F64)           # NaN where a camera ray hits nothing
     image[seen] = frac
     penumbra = float(((frac > 0) & (frac < 1)).double().mean())
-    fig, ax = plt.subplots(figsize=(4.8, 4.6))
-    show_image(image.view(RT_SIZE, RT_SIZE), ax=ax, cmap="gray", vmin=0, vmax=1)
-    ax.set_title(f"light {size:g} wide, {samples}×{samples} rays per pixel\npenumbra {_sig(penumbra)} of the "
-                 f"points", fontsize=10)
-    fig.tight_layout()
-    line = (f"light {size:g} wide, {samples * samples} shadow rays per pixel: mean visibility "
-            f"{_r4(frac.mean())}, penumbra {_r4(penumbra)} of the points seen")
+    rays = f"{samples} x {samples} = {samples * samples} shadow ray{'s' if samples > 1 else ''} per pixel"
+    line = (f"light {size:g} wide, {rays}: mean visibility {_r4(frac.mean())}, penumbra {_r4(penumbra)} of the "
+            f"points seen")
+    fig, ax = plt.subplots(figsize=(5.6, 5.0))
+    cmap = matplotlib.colormaps["gray"].with_extremes(bad=_NO_SURFACE)
+    show_image(image.view(RT_SIZE, RT_SIZE), ax=ax, cmap=cmap, vmin=0, vmax=1)
+    bar = fig.colorbar(ax.images[0], ax=ax, fraction=0.046, pad=0.03, ticks=[0, 0.5, 1])
+    bar.ax.set_yticklabels(["0: umbra", "0.5", "1: fully lit"])
+    bar.set_label("fraction of the light a point sees")
+    ax.legend(handles=[matplotlib.patches.Patch(color=_NO_SURFACE, label="no surface")], loc="upper left",
+              fontsize=8, framealpha=0.9)
+    ax.set_title(f"light {size:g} wide, {rays.replace(' x ', ' × ')}\npenumbra (0 < fraction < 1): "
+                 f"{_sig(penumbra)} of the points seen", fontsize=10)
+    fig.text(0.5, 0.01, line.replace(": ", ":\n", 1), ha="center", va="bottom", fontsize=9)   # the printed line
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     return dict(mean=float(frac.mean()), penumbra=penumbra, line=line)
 
 
@@ -383,6 +405,7 @@ def area_light_explorer() -> None:
 
 # ------------------------------------------------------------------------------------------------ lecture 08
 SOFT_SIZE = 24
+SOFT_FLOOR = 1e-6           # |d image / d x| below this is the forward difference's round-off (~1e-11), not a change
 
 
 @cache
@@ -403,7 +426,10 @@ def draw_soft(log_sigma: float = -2.5, log_gamma: float = -2.0) -> dict:
     A sharp σ gives an image close to the hard one, and a gradient only in a thin band along the edges: most
     pixels tell the optimiser nothing. A wide σ blurs the image but spreads the gradient far from the edges.
     A large γ lets the back triangle show through the front one. The gradient is a forward difference in
-    float64 of an image that is smooth in the vertices (step 1e-5 px: its error is far below what shows).
+    float64 of an image that is smooth in the vertices (step 1e-5 px: its error is far below what shows);
+    a pixel "moves" when it changes by more than ``SOFT_FLOOR`` per px, far above the difference's round-off.
+    Its colour scale ends at the 90th percentile of the pixels that move (the colour bar's arrows: the
+    largest pixels are drawn at its ends), so the band along the edges shows beside a few large pixels.
     """
     from ..mesh import Mesh
     from ..soft import soft_rasterize
@@ -420,13 +446,23 @@ def draw_soft(log_sigma: float = -2.5, log_gamma: float = -2.0) -> dict:
 
     soft = image(0.0)
     d_image = ((image(h) - soft) / h).sum(-1)                               # (H, W) summed over RGB
-    reach = float((d_image.abs() > 1e-3 * d_image.abs().max()).double().mean())
-    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.9))
-    show_image(soft, f"soft image, σ = {sigma:.3g}, γ = {gamma:.3g}", ax=axes[0])
-    signed_image(d_image, "d image / d x (front triangle)", ax=axes[1])
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=0.9, wspace=0.08)
+    size = d_image.abs()
+    moved = size > SOFT_FLOOR                                               # above the difference's round-off
+    reach = float(moved.double().mean())
+    # the colour scale ends at the 90th percentile of the pixels that move, so that a few pixels of a large
+    # derivative do not wash out the rest; the pixels beyond it are drawn at the end of the scale
+    lim = float(torch.quantile(size[moved], 0.9)) if moved.any() else 1.0
     line = (f"sigma {sigma:.3g}, gamma {gamma:.3g}: image mean {_r4(soft.mean())}, gradient sum "
             f"{_r4(d_image.sum())}, nonzero at {_r4(reach)} of the pixels")
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.6))
+    show_image(soft, f"soft image, σ = {sigma:.3g}, γ = {gamma:.3g}", ax=axes[0])
+    show_image(d_image, ax=axes[1], cmap="RdBu_r", vmin=-lim, vmax=lim)
+    axes[1].set_title(f"d image / d x (front triangle): {int(moved.sum())} pixels move,\n"
+                      f"{int((size > lim).sum())} beyond ±{_sig(lim)} drawn at the ends", fontsize=10)
+    fig.colorbar(axes[1].images[0], ax=axes[1], fraction=0.046, pad=0.03, extend="both",
+                 label="per px of shift (red: brighter)")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     return dict(mean=float(soft.mean()), gradient=float(d_image.sum()), reach=reach, line=line)
 
 
@@ -724,14 +760,16 @@ def loss_landscape_explorer() -> None:
 
 
 # ------------------------------------------------------------------------------------------------ lecture 11
-STYLE_WEIGHTS = [0.0, 0.01, 0.1, 1.0, 10.0]
+STYLE_WEIGHTS = [0.0, 0.01, 0.03, 0.1, 1.0, 10.0]
 STYLE_SIZE = 32
+STYLE_STEPS = 100
 
 
 @cache
 def _style_run(weight: float):
-    """The image nearest a content image (a checker) in L2 plus ``weight`` × the style loss of stripes,
-    40 Adam steps from the content, float64."""
+    """The image nearest a content image (a checker) in L2 plus ``weight`` × the style loss of stripes:
+    STYLE_STEPS Adam steps (lr 0.1) on its logits from the content, float64. Enough steps that each weight
+    reaches its own balance of the two terms (after 40, every weight from 1 up gave the same image)."""
     from ..models import checker_texture
     from ..style import RandomFeatures, stripes, style_loss
     net = RandomFeatures(sizes=(3, 5), channels=16, scales=2, seed=0, dtype=F64)
@@ -740,7 +778,7 @@ def _style_run(weight: float):
     target = [g.detach() for g in net(style)]
     logit = torch.logit(content.clamp(0.02, 0.98)).clone().requires_grad_(True)
     opt = torch.optim.Adam([logit], lr=0.1)
-    for _ in range(40):
+    for _ in range(STYLE_STEPS):
         image = torch.sigmoid(logit)
         loss = ((image - content) ** 2).mean() + weight * style_loss(net(image), target)
         opt.zero_grad()
@@ -752,17 +790,21 @@ def _style_run(weight: float):
 
 def draw_style_weight(weight: float = 0.1) -> dict:
     """Style transfer's one knob: the weight of the style loss against the content loss. The result starts
-    at the content (a checker) and takes 40 Adam steps on its pixels (each weight is computed once).
+    at the content (a checker) and takes 100 Adam steps on its pixels (each weight is computed once); its
+    content error and style loss are printed above it.
 
-    At weight 0 nothing changes; as the weight grows, the stripes' statistics (their Gram matrices) take
-    over and the checker dissolves into stripes; the content error rises as the style error falls.
+    At weight 0 nothing changes; from 0.01 stripes show through the squares, at 0.1 both are there, and from 1
+    the stripes cover the checker (its squares still tint them); the content error rises as the style loss
+    falls. Adam's steps are about lr long whatever the loss's scale, so once the style term dominates a larger
+    weight changes little: 1 and 10 are close. Images are sRGB-encoded for the screen, as every figure.
     """
     weight = _check_choice("weight", weight, STYLE_WEIGHTS)
     content, style, image, content_err, style_err = _style_run(weight)
-    fig, axes = plt.subplots(1, 3, figsize=(8.4, 3.0))
-    show_image(content, "content", ax=axes[0])
-    show_image(style, "style", ax=axes[1])
-    show_image(image, f"weight {weight:g}", ax=axes[2])
+    fig, axes = plt.subplots(1, 3, figsize=(10.5, 4.0))
+    show_image(content, "content (a checker)", ax=axes[0])
+    show_image(style, "style (stripes)", ax=axes[1])
+    show_image(image, f"style weight {weight:g}", ax=axes[2])
+    axes[2].set_xlabel(f"content error {_sig(content_err)}, style loss {_sig(style_err)}")
     fig.tight_layout()
     line = f"style weight {weight:g}: content error {_sig(content_err)}, style loss {_sig(style_err)}"
     return dict(content=content_err, style=style_err, line=line)
@@ -840,7 +882,7 @@ EXPLORERS = {
     "10 loss landscape": (loss_landscape_explorer, draw_loss_landscape,
                           dict(sigma=SIGMAS[1:2] + SIGMAS[:1] + SIGMAS[2:]), False),
     "11 style weight": (style_weight_explorer, draw_style_weight,
-                        dict(weight=STYLE_WEIGHTS[2:3] + STYLE_WEIGHTS[:2] + STYLE_WEIGHTS[3:]), False),
+                        dict(weight=STYLE_WEIGHTS[3:4] + STYLE_WEIGHTS[:3] + STYLE_WEIGHTS[4:]), False),
     "12 shadow light": (shadow_light_explorer, draw_shadow_light,
                         dict(azimuth=(-180.0, 180.0, 5.0, 30.0), elevation=(15.0, 85.0, 5.0, 60.0)), False),
 }
