@@ -17,7 +17,7 @@ from course.bench import explorers as bench  # noqa: E402
 from course.viz import explorers as E  # noqa: E402
 
 # a drop-down option that computes a whole fit or synthesis is not re-run here (its default is)
-COSTLY_OPTIONS = {"10 loss landscape", "11 style weight"}
+COSTLY_OPTIONS = {"10 loss landscape", "11 style weight", "13 reconstruction views"}
 
 
 def widget_tree(bundle):

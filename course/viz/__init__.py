@@ -20,9 +20,11 @@ from .antialias import *  # noqa: F401,F403
 from .gradients import *  # noqa: F401,F403
 from .raytrace import *  # noqa: F401,F403
 from .explorers import *  # noqa: F401,F403
+from . import learning  # noqa: E402  (lecture 13's explorer; registers itself in explorers.EXPLORERS)
+from .learning import *  # noqa: F401,F403
 
 __all__ = (list(_core_all) + cameras.__all__ + raster.__all__ + shading.__all__ + antialias.__all__ + raytrace.__all__
-           + gradients.__all__ + explorers.__all__)
+           + gradients.__all__ + explorers.__all__ + learning.__all__)
 
 from .fit import fit_figure, history_frames, mesh_renderer, plot_history, save_fit_gif, save_gif, show_gif
 __all__ += ["plot_history", "history_frames", "mesh_renderer", "save_gif", "save_fit_gif", "fit_figure", "show_gif"]
