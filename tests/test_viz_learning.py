@@ -12,8 +12,8 @@ import pytest  # noqa: E402
 from course import viz  # noqa: E402
 from course.viz import explorers as E, learning as L  # noqa: E402
 
-DEFAULT_LINE = ("star, azimuth 90 deg, elevation 30 deg: silhouette IoU 0.849, network pixels / target's 0.94; "
-                "network volume / target's 1.43")
+DEFAULT_LINE = ("torus, azimuth 0 deg, elevation 90 deg: silhouette IoU 0.598, network pixels / target's 0.99; "
+                "network volume / target's 1.59")
 
 
 def test_it_is_exported_and_registered():
@@ -39,8 +39,10 @@ def test_the_view_lies_on_its_curve_and_the_overlay_counts_pixels():
     assert L._iou(target, target) == 1.0 and L._iou(target & False, target & False) == 1.0   # empty: a match
 
 
-def test_looking_straight_down_works():
-    out = L.draw_reconstruction_view("torus", 0.0, 90.0)
+def test_looking_straight_down_works_and_the_figure_carries_its_line():
+    out = L.draw_reconstruction_view("star", 45.0, 90.0)
+    fig = plt.gcf()
+    assert out["line"] in [t.get_text() for t in fig.texts]                 # the line follows the controls
     plt.close("all")
     assert 0 < out["iou"] < 1
 
