@@ -162,8 +162,9 @@ def draw_supersampling(k: int = 2, jitter: bool = False, shape: str = "sliver") 
     The coverage panels share one colour scale from 0 (dark) to 1 (yellow), so the sliver's faint pixels
     (at most 0.36 covered) stand out from the empty ones. Look at the error image (estimate - exact; red:
     too bright, blue: too dark, its colour bar in coverage units): with a regular grid the sliver breaks into
-    pieces until k is large, and the error sits in runs along the edges (aliasing); jitter turns the runs
-    into noise of the same size. The RMS error falls roughly like 1/k for both (edges are what is left).
+    pieces at small k (8 pieces at 2 × 2, one from 4 × 4 on), and the error sits in runs along the edges
+    (aliasing); jitter turns the runs into noise of the same size. The RMS error falls roughly like k^-1.5
+    for both shapes, as on lecture 05's spheres (edges are what is left).
     The line printed under the figure is the one the explorer cell prints for its defaults.
     """
     from ..antialias import supersample
