@@ -8,7 +8,8 @@ from course import models
 from course.inverse import fit_silhouettes, sphere_views
 from course.inverse.large_steps import Parameterization, UniformAdam, laplacian
 from course.mesh import Mesh
-from course.inverse.metrics import chamfer_distance, normal_consistency, sample_surface, shape_metrics
+from course.inverse.metrics import (chamfer_distance, f_score, normal_consistency, sample_surface, shape_metrics,
+                                   surface_distance)
 
 
 def _expected_offset_chamfer(d):
@@ -31,6 +32,44 @@ def test_chamfer_of_concentric_and_offset_spheres():
     shifted = Mesh(a.verts + torch.tensor([0.3, 0.0, 0.0], dtype=torch.float64), a.faces)
     want = _expected_offset_chamfer(0.3) / (2 * math.sqrt(3))
     assert abs(chamfer_distance(shifted, a) / want - 1) < 0.03
+
+
+def test_f_score_of_concentric_spheres_and_half_a_sphere():
+    """Concentric spheres a gap apart: every point is within the gap of the other surface (the gap along the
+    normal is the nearest distance up to the sampling's spacing), so F is 1 for a threshold above it and 0 below.
+    A closed sphere against its upper half (a cap, open): precision 1, recall about 1/2, F about 2/3."""
+    unit, wider = models.icosphere(4, 1.0, dtype=torch.float64), models.icosphere(4, 1.03, dtype=torch.float64)
+    assert f_score(unit, unit, samples=3000) == 1.0
+    assert f_score(unit, wider, threshold=0.04, samples=3000) == 1.0
+    assert f_score(unit, wider, threshold=0.02, samples=3000) == 0.0
+    keep = unit.verts[unit.faces].mean(1)[:, 1] > 0
+    cap = Mesh(unit.verts, unit.faces[keep])
+    assert abs(f_score(cap, unit, threshold=0.02, samples=4000) - 2 / 3) < 0.03
+    with pytest.raises(ValueError, match="threshold"):
+        f_score(unit, unit, threshold=0.0)
+
+
+def test_surface_distance_is_exact_in_every_region_of_a_triangle():
+    """Points over the face, beyond each edge and each vertex, on the triangle, and a degenerate triangle: the
+    distance is the hand-computed one, and never above a dense sampling's nearest point."""
+    tri = Mesh(torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=torch.float64), torch.tensor([[0, 1, 2]]))
+    p = torch.tensor([[0.2, 0.2, 0.5], [2, 0, 0], [0.5, 0.5, 1], [-1, -1, 0], [0.5, -1, 0], [0.3, 0.3, -0.1],
+                      [0.25, 0.25, 0], [0, 3, 4]], dtype=torch.float64)
+    expected = torch.tensor([0.5, 1, 1, 2 ** 0.5, 1, 0.1, 0, 20 ** 0.5], dtype=torch.float64)
+    torch.testing.assert_close(surface_distance(p, tri), expected, atol=1e-15, rtol=0)
+    g = torch.Generator().manual_seed(3)
+    for degenerate in (False, True):
+        v = torch.randn(3, 3, generator=g, dtype=torch.float64)
+        if degenerate:
+            v[2] = v[0] + 0.5 * (v[1] - v[0])                                   # a segment
+        x = torch.randn(100, 3, generator=g, dtype=torch.float64) * 2
+        u = torch.linspace(0, 1, 401, dtype=torch.float64)
+        uu, vv = torch.meshgrid(u, u, indexing="ij")
+        keep = uu + vv <= 1 + 1e-12
+        dense = v[0] + uu[keep, None] * (v[1] - v[0]) + vv[keep, None] * (v[2] - v[0])
+        brute = torch.cdist(x, dense).min(1).values
+        got = surface_distance(x, Mesh(v, torch.tensor([[0, 1, 2]])))
+        assert bool((got <= brute + 1e-14).all()) and float((brute - got).max()) < 5e-4
 
 
 def test_the_grid_search_finds_exactly_the_brute_forces_nearest_samples():

@@ -23,7 +23,7 @@ from .pose import CAMERA_METHODS, camera_problem, center_error, fit_camera, rota
 from .common import (CameraFit, FitHistory, SilhouetteFit, circle_views, hard_silhouettes, held_out_iou,
                      self_intersections, sphere_views, start_verts)
 from .losses import iou, psnr, silhouette_iou_loss, smoothness_loss
-from .metrics import chamfer_distance, normal_consistency, shape_metrics
+from .metrics import chamfer_distance, f_score, normal_consistency, shape_metrics
 from .shaded import (GRADIENTS, SKY, ImageFit, ShadedData, coverage_masks, fit_mesh_from_images, held_out_psnr,
                      shaded_data, shaded_face_colors, shaded_images)
 from .silhouettes import fit_mesh_from_silhouettes, fit_silhouettes
@@ -35,5 +35,5 @@ __all__ = ["FitHistory", "SilhouetteFit", "CameraFit", "circle_views", "sphere_v
            "SKY", "GRADIENTS", "ImageFit", "ShadedData", "shaded_data", "fit_mesh_from_images", "shaded_images",
            "held_out_psnr", "coverage_masks", "shaded_face_colors", "CAMERA_METHODS", "camera_problem", "fit_camera",
            "rotation_error", "center_error", "iou", "psnr", "silhouette_iou_loss", "smoothness_loss",
-           "chamfer_distance", "normal_consistency", "shape_metrics", "fit_texture_from_images",
+           "chamfer_distance", "f_score", "normal_consistency", "shape_metrics", "fit_texture_from_images",
            "fit_vertex_colors_from_images", "fit_with_learned_views"]
