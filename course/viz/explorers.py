@@ -426,7 +426,9 @@ def draw_soft(log_sigma: float = -2.5, log_gamma: float = -2.0) -> dict:
 
     A sharp σ gives an image close to the hard one, and a gradient only in a thin band along the edges: most
     pixels tell the optimiser nothing. A wide σ blurs the image but spreads the gradient far from the edges.
-    A large γ lets the back triangle show through the front one. The gradient is a forward difference in
+    A large γ lets the back triangle show through the front one; a small γ at fixed σ lets the front triangle
+    outweigh the white background past its edges, by sqrt(σ_px (z - ε) / γ) pixels (the line's border; the
+    largest derivatives then sit on that border, not on the edges). The gradient is a forward difference in
     float64 of an image that is smooth in the vertices (step 1e-5 px: its error is far below what shows);
     a pixel "moves" when it changes by more than ``SOFT_FLOOR`` per px, far above the difference's round-off.
     Its colour scale ends at the 90th percentile of the pixels that move (the colour bar's arrows: the
@@ -453,18 +455,23 @@ def draw_soft(log_sigma: float = -2.5, log_gamma: float = -2.0) -> dict:
     # the colour scale ends at the 90th percentile of the pixels that move, so that a few pixels of a large
     # derivative do not wash out the rest; the pixels beyond it are drawn at the end of the scale
     lim = float(torch.quantile(size[moved], 0.9)) if moved.any() else 1.0
+    # how far the front triangle outweighs the background past its edges (lecture 08, section 4):
+    # D e^{z/γ} > e^{ε/γ} where d² < σ (z - ε) / γ, d in NDC units (2 across the image)
+    z_front = (camera.far - 1.0) / (camera.far - camera.near)              # orthographic: linear in depth 1
+    border = math.sqrt(sigma * SOFT_SIZE ** 2 / 4 * (z_front - 1e-3) / gamma)   # pixels
     line = (f"sigma {sigma:.3g}, gamma {gamma:.3g}: image mean {_r4(soft.mean())}, gradient sum "
-            f"{_r4(d_image.sum())}, nonzero at {_r4(reach)} of the pixels")
-    fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.6))
+            f"{_r4(d_image.sum())}, nonzero at {_r4(reach)} of the pixels; the front triangle outweighs "
+            f"the background up to {_sig(border)} px past its edges")
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 5.0))
     show_image(soft, f"soft image, σ = {sigma:.3g}, γ = {gamma:.3g}", ax=axes[0])
     show_image(d_image, ax=axes[1], cmap="RdBu_r", vmin=-lim, vmax=lim)
     axes[1].set_title(f"d image / d x (front triangle): {int(moved.sum())} pixels move,\n"
                       f"{int((size > lim).sum())} beyond ±{_sig(lim)} drawn at the ends", fontsize=10)
     fig.colorbar(axes[1].images[0], ax=axes[1], fraction=0.046, pad=0.03, extend="both",
                  label="per px of shift (red: brighter)")
-    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    return dict(mean=float(soft.mean()), gradient=float(d_image.sum()), reach=reach, line=line)
+    fig.text(0.5, 0.01, line.replace("; ", ";\n"), ha="center", va="bottom", fontsize=9)   # the printed line
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
+    return dict(mean=float(soft.mean()), gradient=float(d_image.sum()), reach=reach, border=border, line=line)
 
 
 def soft_explorer() -> None:
