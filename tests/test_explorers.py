@@ -177,3 +177,27 @@ def test_bench_runs_and_reports_rows(capsys):
     assert "03 fill rule" in out and "median ms" in out
     assert bench.slider_moves(dict(k=(1, 8, 1, 2), jitter=False, shape=["a", "b", "c"])) == [
         {"k": 1}, {"k": 8}, {"jitter": True}, {"shape": "b"}, {"shape": "c"}]
+
+
+def test_lecture_12_shadow_light_is_legible_linear_and_carries_its_line():
+    import math
+
+    import torch
+    from course.shadows.gradients import shadowed_coverage
+    for kwargs in ({}, dict(azimuth=-60.0, elevation=30.0)):               # the defaults, then moved controls
+        out = E.draw_shadow_light(**kwargs)
+        fig = plt.gcf()
+        assert out["line"] in [t.get_text() for t in fig.texts], kwargs
+        image, gradient = fig.axes[0].images[0], fig.axes[1].images[0]
+        assert image.get_array().shape[:2] == (E.SHADOW_SIZE, E.SHADOW_SIZE) and E.SHADOW_SIZE >= 40
+        assert len(fig.axes) == 3 and gradient.get_clim()[0] == -gradient.get_clim()[1]   # a colour bar, signed
+        assert "red" in fig.axes[2].get_ylabel()
+        plt.close("all")
+    E.draw_shadow_light()                                                   # linear, as the lecture's images
+    shown = plt.gcf().axes[0].images[0].get_array()
+    a, e = math.radians(30.0), math.radians(60.0)
+    light = -torch.tensor([math.cos(e) * math.sin(a), math.sin(e), math.cos(e) * math.cos(a)], dtype=torch.float64)
+    mesh, camera, colors, _ = E._shadow_problem()
+    expected = shadowed_coverage(mesh, camera, colors, light).clamp(0, 1).numpy()
+    assert abs(shown - expected).max() < 1e-12
+    plt.close("all")

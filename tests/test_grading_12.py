@@ -1,7 +1,8 @@
 """Lecture 12's graded tasks (course/grading/lecture12.py): the references agree with the package
 (course.shadows.gradients.project_onto_plane, the split's shadows, variance_visibility, autograd for the
 velocity), they score full marks, a solution written as a student would scores full marks without calling
-them, typical mistakes lose points with the diagnosis a student can act on, and calling the package scores 0."""
+them, typical mistakes lose points with the diagnosis a student can act on, and calling the package scores 0;
+12.5's distribution is where the package's variance test is exact, and everywhere else it is an upper bound."""
 import torch
 
 from course.shadows import gradients as shadow_gradients, prefiltered as prefiltered_shadows
@@ -11,7 +12,8 @@ from grading_contract import contract
 REFERENCES = {"12.1": lambda x, p, n, l: lecture12._project(x, p, n, l),
               "12.2": lambda x, p, n, l, dl: lecture12._velocity(x, p, n, l, dl),
               "12.3": lambda mu, m2, d, mv: lecture12._lit(mu, m2, d, mv),
-              "12.4": lambda l, g, lr: lecture12._step(l, g, lr)}
+              "12.4": lambda l, g, lr: lecture12._step(l, g, lr),
+              "12.5": lambda mu, var, d: lecture12._tight(mu, var, d)}
 
 
 # ------------------------------------------------------------------------------ solutions, as students write
@@ -41,7 +43,14 @@ def light_step(light, grad, lr):
     return new / torch.linalg.norm(new)
 
 
-SOLUTIONS = {"12.1": project_onto_plane, "12.2": shadow_velocity, "12.3": variance_lit, "12.4": light_step}
+def tight_distribution(mu, var, depth):
+    t = depth - mu
+    p = var / (var + t ** 2)                                              # lit: the receiver sees itself
+    return torch.stack([depth, mu - var / t], -1), torch.stack([p, 1 - p], -1)
+
+
+SOLUTIONS = {"12.1": project_onto_plane, "12.2": shadow_velocity, "12.3": variance_lit, "12.4": light_step,
+             "12.5": tight_distribution}
 
 
 # ------------------------------------------------------------------------------------- typical mistakes
@@ -68,14 +77,59 @@ MISTAKES = [
     ("12.4", lambda l, g, lr: lecture12._step(l, g, lr, "no_normalize"), 1, ["unit vector"]),
     ("12.4", lambda l, g, lr: lecture12._step(l, g, lr, "no_projection"), 1, ["along the light"]),
     ("12.4", in_place_step, 0, ["in place"]),
+    ("12.5", lambda mu, var, d: lecture12._tight(mu, var, d, "symmetric"), 0, ["μ ± σ", "receiver's own depth d"]),
+    ("12.5", lambda mu, var, d: lecture12._tight(mu, var, d, "swapped"), 0, ["swapped"]),
+    ("12.5", lambda mu, var, d: lecture12._tight(mu, var, d, "sigma"), 0, ["keep the mean"]),
+    ("12.5", lambda mu, var, d: lecture12._tight(mu, var, d, "std"), 0, ["with the variance"]),
+    ("12.5", lambda mu, var, d: tuple(t.double() for t in lecture12._tight(mu, var, d)), 3, ["float32"]),
+    ("12.5", lambda mu, var, d: lecture12._tight(mu, var, d)[0], 0, ["tuple"]),
+    ("12.5", lambda mu, var, d: (lambda z, w: (z, w * 1.1))(*lecture12._tight(mu, var, d)), 0, ["distribution"]),
+    ("12.5", lambda mu, var, d: (lambda z, w: (z + torch.stack([torch.zeros_like(d), 0.1 + 0 * d], -1), w))(
+        *lecture12._tight(mu, var, d)), 0, ["mean"]),
 ]
 
 (test_the_reference_scores_full_marks, test_a_students_solution_scores_full_marks,
  test_a_typical_mistake_loses_points_with_a_useful_message) = contract(REFERENCES, SOLUTIONS, MISTAKES)
 
 
-def test_lecture_12_has_four_tasks():
-    assert [t.id for t in tasks_for_lecture(12)] == ["12.1", "12.2", "12.3", "12.4"]
+def test_lecture_12_has_five_tasks_the_analysis_worth_the_most():
+    tasks = tasks_for_lecture(12)
+    assert [t.id for t in tasks] == ["12.1", "12.2", "12.3", "12.4", "12.5"]
+    assert tasks[-1].points > max(t.points for t in tasks[:-1])
+
+
+def test_the_tight_distribution_is_where_the_variance_test_is_exact():
+    """A texel holding 12.5's two depths (one planar occluder, and the receiver seen through its gaps): the
+    package's variance test returns the true lit fraction, to rounding."""
+    mu, var, d = lecture12._texels(7, 16)
+    z, w = lecture12.tight_distribution_reference(mu, var, d)
+    m1, m2 = (w * z).sum(-1), (w * z * z).sum(-1)
+    moments = torch.stack([m1, m2], -1).view(4, 4, 2)
+    i, j = torch.meshgrid(torch.arange(4.0, dtype=torch.float64), torch.arange(4.0, dtype=torch.float64),
+                          indexing="ij")
+    centres = torch.stack([j.reshape(-1), i.reshape(-1)], 1) + 0.5
+    estimate = prefiltered_shadows.variance_visibility(moments, centres, d, min_variance=1e-12)
+    exact = (w * (z >= d[:, None])).sum(-1)                                 # z = d exactly: the receiver itself
+    assert torch.allclose(estimate, exact, rtol=0, atol=1e-10)
+
+
+def test_the_variance_test_is_an_upper_bound_on_the_lit_fraction():
+    """Random discrete depth distributions (1 to 5 depths): the map's estimate is never below the true lit
+    fraction P(z >= d) (Cantelli), and with two occluders and nothing lit it leaks light."""
+    g = torch.Generator().manual_seed(12)
+    for k in range(1, 6):
+        z = 1 + torch.rand(200, k, generator=g, dtype=torch.float64)
+        w = torch.rand(200, k, generator=g, dtype=torch.float64)
+        w = w / w.sum(-1, keepdim=True)
+        d = 1 + 1.2 * torch.rand(200, generator=g, dtype=torch.float64)
+        mu, m2 = (w * z).sum(-1), (w * z * z).sum(-1)
+        estimate = lecture12.variance_lit_reference(mu, m2, d, 1e-12)
+        exact = (w * (z >= d[:, None])).sum(-1)
+        assert bool((estimate >= exact - 1e-12).all()), k
+    two = lecture12.variance_lit_reference(torch.tensor([1.5], dtype=torch.float64),
+                                           torch.tensor([0.5 * 1.0 + 0.5 * 4.0], dtype=torch.float64),
+                                           torch.tensor([2.5], dtype=torch.float64))
+    assert abs(float(two) - 0.2) < 1e-12                                  # occluders at 1 and 2: truly 0 lit
 
 
 def test_the_references_are_the_package():

@@ -1,5 +1,5 @@
 """The checks of lecture 12's graded tasks (differentiable shadows): 12.1 project_onto_plane,
-12.2 shadow_velocity, 12.3 variance_lit, 12.4 light_step.
+12.2 shadow_velocity, 12.3 variance_lit, 12.4 light_step, 12.5 tight_distribution.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
@@ -11,10 +11,17 @@ module, which registers its checks in ``course.grading.TASKS``.
   ``v = -h / (n̂ · l) · dl + h (n̂ · dl) / (n̂ · l)² · l`` (both the step's direction and its length change).
 * 12.3, a variance shadow map's test: with the moments μ = E[z], m₂ = E[z²] at a receiver of depth d,
   ``σ² = max(m₂ - μ², min_variance)`` and the fraction lit ``σ² / (σ² + (d - μ)²)`` where d > μ, 1 elsewhere
-  (Chebyshev's bound; ``course.shadows.prefiltered.variance_visibility`` after its map lookup).
+  (the one-sided Chebyshev (Cantelli) inequality: an *upper* bound on the true lit fraction P(z ≥ d), which
+  the map uses as its estimate; ``course.shadows.prefiltered.variance_visibility`` after its map lookup).
 * 12.4, one step of the light fit on the sphere of directions: the gradient's part along the light is
   dropped (it would only change the length), the step taken, the result renormalised:
   ``normalize(l - lr (g - (g · l) l))``.
+* 12.5, an analysis: where the map's estimate is exact. Given μ, σ² and a receiver at d > μ, a depth
+  distribution with those two moments whose true lit fraction P(z ≥ d) equals the bound. It is unique: weight
+  p = σ² / (σ² + t²) at the receiver's own depth d = μ + t and 1 - p at the occluder's depth μ - σ² / t (one
+  planar occluder over the receiver, Donnelly and Lauritzen's exact case). The check grades the properties
+  (a distribution, its mean, its variance, its lit fraction), so it names what is off, and recognises the
+  answers of the typical mistakes (μ ± σ, the weights swapped, the occluder at μ - σ, a bound with σ).
 
 The references are written here, in float64; ``tests/test_grading_12.py`` checks that they agree with the
 package. A graded function that calls them, or the package functions doing the task's work, scores 0.
@@ -23,18 +30,19 @@ from __future__ import annotations
 
 import torch
 
-from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
+from .helpers import _call, _match, _unpack, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__ = ["project_onto_plane_reference", "shadow_velocity_reference", "variance_lit_reference",
-           "light_step_reference"]
+           "light_step_reference", "tight_distribution_reference"]
 
 FORBIDDEN = [("course.shadows.gradients", "project_onto_plane"), ("course.shadows.gradients", "split_by_shadows"),
              ("course.shadows.prefiltered", "variance_visibility"), ("course.shadows.fit", "fit_light_direction"),
              ("course.grading.lecture12", "project_onto_plane_reference"),
              ("course.grading.lecture12", "shadow_velocity_reference"),
              ("course.grading.lecture12", "variance_lit_reference"),
-             ("course.grading.lecture12", "light_step_reference")]
+             ("course.grading.lecture12", "light_step_reference"),
+             ("course.grading.lecture12", "tight_distribution_reference")]
 
 
 # ------------------------------------------------------------------------------------- the references
@@ -50,13 +58,19 @@ def shadow_velocity_reference(points, plane_point, plane_normal, light, dlight) 
 
 
 def variance_lit_reference(mu, m2, depth, min_variance=1e-6) -> torch.Tensor:
-    """12.3: the fraction lit by Chebyshev's bound, elementwise."""
+    """12.3: the variance shadow map's lit fraction, Chebyshev's (Cantelli's) upper bound, elementwise."""
     return _lit(mu, m2, depth, min_variance)
 
 
 def light_step_reference(light, grad, lr) -> torch.Tensor:
     """12.4: (3,) ``normalize(l - lr (g - (g · l) l))``."""
     return _step(light, grad, lr)
+
+
+def tight_distribution_reference(mu, var, depth):
+    """12.5: (depths (..., 2), weights (..., 2)): the two-point depth distribution with mean ``mu``, variance
+    ``var`` whose lit fraction at ``depth`` > ``mu`` is Cantelli's bound: the occluder first, the receiver second."""
+    return _tight(mu, var, depth)
 
 
 def _project(x, p, n, l, kind="light"):
@@ -112,6 +126,25 @@ def _step(l, g, lr, kind="full"):
     if kind == "no_normalize":
         return out
     return out / out.norm()
+
+
+def _tight(mu, var, d, kind="full"):
+    """(depths (..., 2), weights (..., 2)), the occluder's first; ``kind`` gives a typical mistake's answer."""
+    t = d - mu
+    p = var / (var + t * t)                                                 # Cantelli's bound
+    occluder = mu - var / t                                                 # p d + (1 - p) z_o = μ
+    if kind == "symmetric":                                                 # two depths, one σ either side
+        s = var.sqrt()
+        return torch.stack([mu - s, mu + s], -1), torch.full(mu.shape + (2,), 0.5, dtype=mu.dtype)
+    if kind == "swapped":
+        return torch.stack([occluder, d], -1), torch.stack([p, 1 - p], -1)
+    if kind == "sigma":                                                     # the occluder one σ in front
+        occluder = mu - var.sqrt()
+    if kind == "std":                                                       # a bound written with σ, not σ²
+        s = var.sqrt()
+        p = s / (s + t)
+        occluder = mu - p * t / (1 - p)
+    return torch.stack([occluder, d], -1), torch.stack([1 - p, p], -1)
 
 
 def _unit(v):
@@ -345,3 +378,91 @@ def _check_step(impl):
     def along():
         require(_step_problem(impl, *cases[2]))
     return grade_parts((1, "a step on the sphere", basic), (1, "a gradient along the light", along))
+
+
+# ------------------------------------------------------------ 12.5 where the map's estimate is exact (an analysis)
+
+def _texels(seed, n, dtype=torch.float64):
+    """μ in [1, 3], σ in [0.03, 0.3], receivers 0.05 to 1 behind the mean."""
+    g = generator(seed)
+    mu = 1 + 2 * torch.rand(n, generator=g, dtype=torch.float64)
+    var = (0.03 + 0.27 * torch.rand(n, generator=g, dtype=torch.float64)) ** 2
+    d = mu + 0.05 + 0.95 * torch.rand(n, generator=g, dtype=torch.float64)
+    return mu.to(dtype), var.to(dtype), d.to(dtype)
+
+
+def _tight_problem(impl, label, mu, var, d):
+    name = f"tight_distribution({label})"
+    out = _call(impl, mu, var, d)
+    z, w = _unpack(out, ("depths", "weights"), "tight_distribution")
+    want = tuple(mu.shape) + (2,)
+    for value, what in ((z, "depths"), (w, "weights")):
+        if tuple(value.shape) != want:
+            return f"{name}: {what} should have shape {want} (two depths per texel), got {tuple(value.shape)}"
+        if value.dtype != mu.dtype:
+            return f"{name}: {what} should be {mu.dtype} like the inputs, got {value.dtype}"
+    if not bool(torch.isfinite(z).all() & torch.isfinite(w).all()):
+        return f"{name}: NaN or inf among the depths or weights"
+    low = mu.dtype == torch.float32
+    z, w = z.double(), w.double()
+    m, v, dd = mu.double(), var.double(), d.double()
+    order = z.argsort(-1)                                                   # nearest the light first
+    z, w = z.gather(-1, order), w.gather(-1, order)
+    got = torch.stack([z, w], -1)
+    explanation = _match(got, [(torch.stack([t.double() for t in _tight(m, v, dd, kind)], -1), why) for kind, why in (
+        ("symmetric", "two depths μ ± σ with weight 1/2 have the right mean and variance, but the receiver is "
+                      "lit by the weight at depths ≥ d, not by the bound: to reach it, put the lit weight at the "
+                      "receiver's own depth d and solve for the other depth"),
+        ("swapped", "the weights are swapped: the lit weight, Cantelli's p = σ² / (σ² + (d - μ)²), belongs to "
+                    "the depth d, 1 - p to the occluder"),
+        ("sigma", "the occluder one σ in front of the mean does not keep the mean: p d + (1 - p) z_o = μ fixes z_o"),
+        ("std", "the lit weight is σ / (σ + (d - μ)): the bound is σ² / (σ² + (d - μ)²), with the variance"),
+    )], tol=1e-4)
+    if explanation:
+        return f"{name}: {explanation}"
+    tol = 1e-4 if low else 1e-9
+    scale = m.abs() + v.sqrt() + 1
+    if bool((w < -tol).any()) or not torch.allclose(w.sum(-1), torch.ones_like(m), atol=tol, rtol=0):
+        return (f"{name}: the weights are not a distribution (each >= 0, summing to 1): sums reach "
+                f"{float((w.sum(-1) - 1).abs().max()) + 1:.6g}, the smallest weight is {float(w.min()):.3g}")
+    mean = (w * z).sum(-1)
+    if not torch.allclose(mean, m, atol=0, rtol=0) and bool(((mean - m).abs() > tol * scale).any()):
+        k = int((mean - m).abs().argmax())
+        return (f"{name}: the mean Σ w z is {float(mean.flatten()[k]):.6g} where μ = {float(m.flatten()[k]):.6g}: "
+                "the distribution must keep the texel's mean")
+    variance = (w * (z - m[..., None]) ** 2).sum(-1)
+    if bool(((variance - v).abs() > tol * (v + tol)).any()):
+        k = int(((variance - v).abs() / v).argmax())
+        return (f"{name}: the variance Σ w (z - μ)² is {float(variance.flatten()[k]):.6g} where σ² = "
+                f"{float(v.flatten()[k]):.6g}: the distribution must keep the texel's variance")
+    bound = v / (v + (dd - m) ** 2)
+    lit = (w * (z >= dd[..., None] - tol * scale[..., None])).sum(-1)      # weight not in front of the receiver
+    if bool(((lit - bound).abs() > 10 * tol).any()):
+        k = int((lit - bound).abs().argmax())
+        return (f"{name}: the weight at depths >= d (what really lights the receiver) is "
+                f"{float(lit.flatten()[k]):.6g}, the map's estimate (Cantelli's bound) {float(bound.flatten()[k]):.6g}: "
+                "the bound is reached only by weight exactly at the receiver's depth d")
+    return None
+
+
+@task("12.5", "tight_distribution", points=4,
+      reference=("course.grading.lecture12", "tight_distribution_reference"))
+def _check_tight(impl):
+    forbidden = forbidden_call(impl, "tight_distribution", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+
+    def random():
+        require(_tight_problem(impl, "12 texels, float64", *_texels(1251, 12)))
+
+    def map32():
+        require(_tight_problem(impl, "a 3 x 4 map, float32", *(t.view(3, 4) for t in _texels(1252, 12,
+                                                                                           torch.float32))))
+
+    def extremes():
+        mu = torch.tensor([2.0, 2.0, 0.5], dtype=torch.float64)
+        var = torch.tensor([1.0, 1e-6, 0.04], dtype=torch.float64)
+        d = torch.tensor([2.001, 3.0, 0.5 + 1e-3], dtype=torch.float64)
+        require(_tight_problem(impl, "a receiver just behind a wide texel's mean, a nearly flat texel", mu, var, d))
+    return grade_parts((2, "random texels", random), (1, "a 2-D map, float32", map32),
+                       (1, "a receiver just behind the mean, a nearly flat texel", extremes))

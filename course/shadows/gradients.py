@@ -42,8 +42,10 @@ Gradients (``shadow_image_gradient``), of ``L = Σ weights ⊙ image``:
   edge's normal velocity on screen is the chain rule through both projections (light → receiver plane →
   camera). The camera's parameters come straight from ``image_gradient``: the split does not depend on them.
 
-Where the derivative is a kink (one-sided: central differences average the two sides, and exact and
-reynolds may pick different sides). Two coplanar faces that share an edge (a quad's two triangles): moving a
+Where the image has a kink there is no derivative, only two one-sided ones that differ: central differences
+average them, and exact and reynolds return values that need not equal either side, nor each other (the height
+of a base corner of ``shadow_scene("crossing")``: one-sided 0.16 and -2.7; lecture 12 leaves such coordinates
+out of its comparisons). Two coplanar faces that share an edge (a quad's two triangles): moving a
 vertex creases them, and a crease shadows one side only, concave or convex. An occluder touching its receiver
 (the cube standing on the floor): the floor's height under it. A vertex of a shadow outline exactly on an edge
 of its receiver (within ``SIDE_TOL``): the split snaps it onto the edge, and the derivative is the snapped

@@ -13,16 +13,21 @@ a shadow map whose every stage is smooth, so that the shadow term has a gradient
 2. **Pre-filtering**: the moment maps are blurred by a Gaussian of ``blur`` texels: what a variance shadow map
    (Donnelly and Lauritzen 2006) filters instead of the depths, so that a texel holds a depth distribution.
 3. **The test, smooth** (``variance_visibility``): at a receiver at depth d, with μ = E[z] and
-   σ² = E[z²] - μ², Chebyshev's bound ``p = σ² / (σ² + (d - μ)²)`` for d > μ (1 otherwise) is the fraction
-   lit. Continuous in d, μ and σ: the gradient flows to the occluders through μ and σ, to the receiver
-   through d.
+   σ² = E[z²] - μ², ``p = σ² / (σ² + (d - μ)²)`` for d > μ (1 otherwise) is taken as the fraction lit. The
+   true fraction is P(z ≥ d), which two moments do not determine; p is the one-sided Chebyshev (Cantelli)
+   inequality, an *upper* bound on it, exact for one planar occluder over a planar receiver (the texel then
+   holds the occluder's depth and the receiver's own) and too bright otherwise. Continuous in d, μ and σ: the
+   gradient flows to the occluders through μ and σ, to the receiver through d.
 4. **The image** (``shadow_map_image``): the camera's visible surface at ``supersample``² points per pixel
    (hard rasterization: this route differentiates the shadow term only, not the primary silhouettes), each
    shaded ``c · (a + (1 - a) · p)`` (0 for faces turned from the light, as in ``shadow_gradients``), averaged.
 
 The bias it trades for smoothness: the shadow edge is blurred over about ``sigma + blur`` texels (its
 gradient is spread over that band, not concentrated on the edge), light bleeds where two occluders overlap
-(Chebyshev's bound is an upper bound), and receivers close to their occluders come out too bright. The
+(the bound is an upper bound), and receivers close to their occluders come out too bright. Every face is in
+the map, receivers too, and the blur pads the map by repeating its border texels: within about two texels
+of the map's edge that flattens a receiver's depth ramp, so with a wide blur the receiver lies behind its own
+blurred mean there and darkens itself (lecture 12, section 5: up to 0.17 at 32 texels with blur 2). The
 exact answer of the same image model is ``shadow_gradients.shadowed_coverage``; ``python -m course bench
 shadow-gradients`` measures the gap.
 """
@@ -67,7 +72,8 @@ def moment_map(mesh, light, resolution: int = 64, *, sigma: float = 0.5, blur: f
     """(moments (R, R, 2), to_light_space): E[z] and E[z²] of the smoothly rasterized, blurred depth from the
     light (module docstring, steps 1-2). sigma: the coverage's softness in texels; blur: the Gaussian
     pre-filter's standard deviation in texels (0: none); region: (N, 3) points the map must span (default every
-    vertex; pass the occluders to spend the texels on them: lookups outside the map see its border)."""
+    vertex; pass the occluders to spend the texels on them: ``variance_visibility`` counts a lookup beyond the
+    map's outer texel centres as lit)."""
     verts, faces, d = _check_scene(mesh, light)
     R = int(resolution)
     if R < 8:
@@ -133,8 +139,9 @@ def _gaussian_blur(maps, blur):
 
 def variance_visibility(moments, coords, depth, *, min_variance: float = 1e-6):
     """(N,) the fraction lit at receivers with texel coordinates ``coords`` (N, 2) and depths ``depth`` (N,)
-    along the light, from the moment maps (R, R, 2) looked up bilinearly: Chebyshev's bound
-    ``σ² / (σ² + (d - μ)²)`` where d > μ, 1 elsewhere (module docstring, step 3). A receiver beyond the map's
+    along the light, from the moment maps (R, R, 2) looked up bilinearly: the one-sided Chebyshev bound
+    ``σ² / (σ² + (d - μ)²)`` where d > μ, 1 elsewhere (module docstring, step 3; an upper bound on the true
+    lit fraction). A receiver beyond the map's
     outer texel centres is lit: the map spans its occluders (``moment_map``'s region), and clamping to its
     border would compare a tilted receiver with the border's depth."""
     R = moments.shape[0]

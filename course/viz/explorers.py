@@ -824,20 +824,25 @@ def style_weight_explorer() -> None:
 
 
 # ------------------------------------------------------------------------------------------------ lecture 12
+SHADOW_SIZE = 48                                                            # pixels a side, as lecture 12's section 1
+
+
 @cache
 def _shadow_problem():
     from ..shadows.gradients import shadow_scene
-    return shadow_scene("floater", 20)
+    return shadow_scene("floater", SHADOW_SIZE)
 
 
 def draw_shadow_light(azimuth: float = 30.0, elevation: float = 60.0) -> dict:
     """The exact shadowed image (lecture 12) of a triangle floating over a floor, lit from ``azimuth`` and
-    ``elevation`` (degrees), and beside it its gradient image: d image / d azimuth (red: brighter as the
-    light turns).
+    ``elevation`` (degrees), and beside it its gradient image: d image / d azimuth, summed over RGB, per degree
+    (red: the pixel brightens as the azimuth grows, blue: it darkens; a colour bar gives the scale).
 
     The gradient lives on the shadow's edges only (inside and outside the shadow nothing changes), and it is
     exact: the image is the area of the lit part of each pixel, a smooth function of the light between the
     moments when a shadow edge crosses a vertex. Lower the light and the shadow stretches; its gradient grows.
+    The image is shown as the lecture shows its images, linear values without sRGB encoding; the line printed
+    under the figure is the one the explorer cell prints for its defaults.
     """
     from ..shadows.gradients import shadowed_coverage
     azimuth, elevation = _check_range("azimuth", azimuth, -180.0, 180.0), _check_range("elevation", elevation,
@@ -851,12 +856,17 @@ def draw_shadow_light(azimuth: float = 30.0, elevation: float = 60.0) -> dict:
     h = 1e-4                                                                # degrees
     image = shadowed_coverage(mesh, camera, colors, light(azimuth))
     d_image = ((shadowed_coverage(mesh, camera, colors, light(azimuth + h)) - image) / h).sum(-1)   # (H, W)
-    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.9))
-    show_image(image, f"light: azimuth {azimuth:g}°, elevation {elevation:g}°", ax=axes[0])
-    signed_image(d_image, "d image / d azimuth (per degree)", ax=axes[1])
-    fig.tight_layout()
     line = (f"azimuth {azimuth:g}, elevation {elevation:g}: image mean {_r4(image.mean())}, "
             f"|d image / d azimuth| summed {_r4(d_image.abs().sum())} per degree")
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.9))
+    show_image(image, ax=axes[0], srgb=False)
+    axes[0].set_title(f"light: azimuth {azimuth:g}°, elevation {elevation:g}°", fontsize=10)
+    signed_image(d_image, ax=axes[1])
+    axes[1].set_title("d image / d azimuth (RGB summed)", fontsize=10)
+    fig.colorbar(axes[1].images[0], ax=axes[1], fraction=0.046, pad=0.03,
+                 label="per degree (red: brighter, blue: darker)")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     return dict(mean=float(image.mean()), gradient=float(d_image.abs().sum()), line=line)
 
 
