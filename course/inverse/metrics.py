@@ -211,23 +211,35 @@ def f_score(pred, target, *, threshold: float = 0.02, samples: int = 20000, seed
 
 
 def surface_distance(points, mesh) -> torch.Tensor:
-    """(N,) float64 the distance from each of ``points`` (N, 3) to the nearest point of ``mesh``'s triangles, by
-    the closest point of each triangle (Ericson, Real-Time Collision Detection, 5.1.5: the vertex, edge or face
-    region the point projects into), the pairs in blocks of about ``PAIRS``."""
+    """(N,) float64 the distance from each of ``points`` (N, 3) to the nearest point of ``mesh``'s triangles.
+
+    Exact: each point's distance to its nearest vertex bounds the answer from above, so only triangles whose
+    bounding box lies within that bound can hold a nearer point; for those pairs the triangle's closest point
+    is found (Ericson, Real-Time Collision Detection, 5.1.5: the vertex, edge or face region the point projects
+    into), and the least distance kept. Points in blocks of about ``PAIRS`` (point, triangle) pairs."""
     verts, faces = _mesh_arrays(mesh, "mesh")
     x = torch.as_tensor(points, dtype=torch.float64)
-    a, b, c = (verts[faces[:, k]][None] for k in range(3))             # (1, F, 3)
+    if x.ndim != 2 or x.shape[-1] != 3:
+        raise ValueError(f"points must be (N, 3), got shape {tuple(x.shape)}")
+    tri = verts[faces]                                                  # (F, 3, 3)
+    lo, hi = tri.min(1).values, tri.max(1).values                       # (F, 3) bounding boxes
+    corners = verts[faces.unique()]                                     # the vertices of some triangle
     out = torch.empty(x.shape[0], dtype=torch.float64)
-    rows = max(1, PAIRS // faces.shape[0])
+    rows = max(1, PAIRS // max(faces.shape[0], corners.shape[0]))
     for start in range(0, x.shape[0], rows):
-        p = x[start:start + rows, None]                                 # (n, 1, 3)
-        out[start:start + rows] = (p - _closest_on_triangles(p, a, b, c)).norm(dim=-1).min(1).values
+        p = x[start:start + rows]                                       # (n, 3)
+        bound = torch.cdist(p, corners).min(1).values                   # (n,) to the nearest corner
+        gap = (lo[None] - p[:, None]).clamp_min(0) + (p[:, None] - hi[None]).clamp_min(0)   # (n, F, 3)
+        i, f = torch.nonzero(gap.square().sum(-1) <= bound.square()[:, None] * (1 + 1e-12), as_tuple=True)
+        near = _closest_on_triangles(p[i], tri[f, 0], tri[f, 1], tri[f, 2])
+        d = (p[i] - near).norm(dim=-1)
+        out[start:start + rows] = bound.scatter_reduce(0, i, d, reduce="amin")
     return out
 
 
 def _closest_on_triangles(p, a, b, c):
-    """(n, F, 3) the point of each triangle (a, b, c) nearest to each p, Ericson's regions tested in his order;
-    a degenerate triangle falls to its vertices and edges."""
+    """(K, 3) the point of triangle (a, b, c) nearest to p, each (K, 3), for K pairs, by Ericson's regions (the
+    last of the list that holds wins); a degenerate triangle falls to its vertices and edges."""
     dot = lambda u, v: (u * v).sum(-1)                                  # noqa: E731
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = dot(ab, ap), dot(ac, ap)
