@@ -52,7 +52,7 @@ def test_the_network_starts_as_the_template_sphere_is_seeded_and_learns(data):
     loss.backward()
     assert per_shape.shape == (3,) and all(p.grad is not None and bool(torch.isfinite(p.grad).all())
                                            for p in a.parameters())
-    model, losses = train_voxel_reconstructor(data, settings=SETTINGS, steps=12, batch=3, views=2, lr=5e-3)
+    _, losses = train_voxel_reconstructor(data, settings=SETTINGS, steps=12, batch=3, views=2, lr=5e-3)
     assert len(losses) == 12 and losses[-1] < losses[0] - 0.02, losses
     one, _ = train_voxel_reconstructor(data, settings=SETTINGS, steps=2, batch=3, views=2, lr=5e-3)
     two, _ = train_voxel_reconstructor(data, settings=SETTINGS, steps=2, batch=3, views=2, lr=5e-3)

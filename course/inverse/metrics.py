@@ -214,23 +214,26 @@ def surface_distance(points, mesh) -> torch.Tensor:
     """(N,) float64 the distance from each of ``points`` (N, 3) to the nearest point of ``mesh``'s triangles.
 
     Exact: each point's distance to its nearest vertex bounds the answer from above, so only triangles whose
-    bounding box lies within that bound can hold a nearer point; for those pairs the triangle's closest point
-    is found (Ericson, Real-Time Collision Detection, 5.1.5: the vertex, edge or face region the point projects
-    into), and the least distance kept. Points in blocks of about ``PAIRS`` (point, triangle) pairs."""
+    bounding sphere reaches within that bound can hold a nearer point; for those pairs the triangle's closest
+    point is found (Ericson, Real-Time Collision Detection, 5.1.5: the vertex, edge or face region the point projects
+    into), and the least distance kept. The triangles are culled by spheres around them (centroid and farthest
+    corner): one ``cdist`` per block of about ``PAIRS`` (point, triangle) pairs."""
     verts, faces = _mesh_arrays(mesh, "mesh")
     x = torch.as_tensor(points, dtype=torch.float64)
     if x.ndim != 2 or x.shape[-1] != 3:
         raise ValueError(f"points must be (N, 3), got shape {tuple(x.shape)}")
     tri = verts[faces]                                                  # (F, 3, 3)
-    lo, hi = tri.min(1).values, tri.max(1).values                       # (F, 3) bounding boxes
+    centre = tri.mean(1)                                                # (F, 3) a sphere around each triangle
+    radius = (tri - centre[:, None]).norm(dim=-1).max(1).values         # (F,)
     corners = verts[faces.unique()]                                     # the vertices of some triangle
+    slack = 1e-9 * (1 + float(x.abs().max()) + float(corners.abs().max()))   # cdist's rounding, generously
     out = torch.empty(x.shape[0], dtype=torch.float64)
     rows = max(1, PAIRS // max(faces.shape[0], corners.shape[0]))
     for start in range(0, x.shape[0], rows):
         p = x[start:start + rows]                                       # (n, 3)
         bound = torch.cdist(p, corners).min(1).values                   # (n,) to the nearest corner
-        gap = (lo[None] - p[:, None]).clamp_min(0) + (p[:, None] - hi[None]).clamp_min(0)   # (n, F, 3)
-        i, f = torch.nonzero(gap.square().sum(-1) <= bound.square()[:, None] * (1 + 1e-12), as_tuple=True)
+        reach = torch.cdist(p, centre) - radius                         # (n, F) no nearer than this
+        i, f = torch.nonzero(reach <= bound[:, None] + slack, as_tuple=True)
         near = _closest_on_triangles(p[i], tri[f, 0], tri[f, 1], tri[f, 2])
         d = (p[i] - near).norm(dim=-1)
         out[start:start + rows] = bound.scatter_reduce(0, i, d, reduce="amin")
