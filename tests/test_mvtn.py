@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from course.learning.mvtn import (MODES, MultiViewClassifier, MVTNSettings, evaluate_mvtn, make_mvtn_data,
-                         plot_view_directions, train_mvtn, view_directions)
+                                  plot_view_directions, random_rotation, train_mvtn, view_directions)
 from course.learning.data import view_cameras
 
 SMALL = dict(size=16, views=3)
@@ -42,6 +42,29 @@ def test_gradients_reach_the_views(data, mode):
         grads = [model.view_net["head"].weight.grad]                        # weights get the gradient first
     for g in grads:
         assert g is not None and bool(torch.isfinite(g).all()) and float(g.abs().max()) > 0
+
+
+def test_sphere_views_spread_over_the_sphere_and_stay_fixed():
+    model = MultiViewClassifier(MVTNSettings(mode="sphere", views=8, size=16))
+    assert not model.azimuth.requires_grad and not model.elevation_raw.requires_grad
+    azimuth, elevation = model.view_angles()
+    z = torch.sin(torch.deg2rad(elevation.double()))                          # equal-area bands: 1 - (2k+1)/N
+    torch.testing.assert_close(z, 1 - (2 * torch.arange(8, dtype=torch.float64) + 1) / 8, atol=1e-6, rtol=0)
+    d = view_directions(azimuth, elevation)
+    gaps = torch.cdist(d, d) + 9 * torch.eye(8)
+    assert float(gaps.min()) > 0.6                                            # no two views close together
+
+
+def test_rotated_data_turns_each_shape_by_its_own_rotation():
+    upright, _ = make_mvtn_data(1, 1)
+    turned, _ = make_mvtn_data(1, 1, rotate=True)
+    for a, b, seed in zip(upright.meshes, turned.meshes, turned.seeds):
+        R = random_rotation(int(seed))
+        torch.testing.assert_close(R @ R.T, torch.eye(3, dtype=torch.float64), atol=1e-12, rtol=0)
+        assert abs(float(torch.linalg.det(R)) - 1) < 1e-12
+        torch.testing.assert_close(b.verts, a.verts @ R.float().T)
+        assert torch.equal(a.faces, b.faces)
+    assert not torch.equal(random_rotation(1), random_rotation(2))
 
 
 def test_fixed_views_get_no_gradient_and_predicted_views_are_per_object(data):
@@ -95,4 +118,4 @@ def test_bad_input(data):
         model([])
     with pytest.raises(ValueError, match="classes"):
         train_mvtn(train, settings=MVTNSettings(classes=3, **SMALL), steps=1)
-    assert MODES == ("fixed", "learned", "predicted")
+    assert MODES == ("fixed", "sphere", "learned", "predicted")

@@ -136,7 +136,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--mvtn-views", type=int, default=4, help="MVTN: views per shape")
     parser.add_argument("--mvtn-steps", type=int, default=150, help="MVTN: training steps")
     parser.add_argument("--mvtn-seeds", nargs="+", type=int, default=[0, 1, 2], help="MVTN: seeds (weights)")
-    parser.add_argument("--mvtn-modes", nargs="+", choices=("fixed", "learned", "predicted"),
+    parser.add_argument("--mvtn-modes", nargs="+", choices=("fixed", "sphere", "learned", "predicted"),
                         default=["fixed", "learned"], help="MVTN: how the views are chosen (predicted: per object, "
                                                            "about 4 more minutes)")
     parser.add_argument("--plot", default="", help="MVTN: draw the view directions on a sphere in this file")

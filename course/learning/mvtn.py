@@ -8,9 +8,11 @@ loss has a gradient w.r.t. the cameras too, and the views can be learned with th
 
     angles (N, 2) ─cameras─▶ soft_rasterize(mesh, cameras) (N, H, W) ─CNN─▶ (N, D) ─max─▶ (D,) ─linear─▶ scores
 
-Three ways to choose the angles (azimuth a, elevation e; ``MVTNSettings.mode``):
+Four ways to choose the angles (azimuth a, elevation e; ``MVTNSettings.mode``):
 
 * ``"fixed"``: a circle, azimuths 360°/N apart at ``elevation`` degrees, never trained;
+* ``"sphere"``: N directions spread over the sphere (a Fibonacci spiral: elevations asin(1 − (2k + 1)/N),
+  within ±80°, azimuths a golden angle apart), never trained: MVTN's "spherical" fixed baseline;
 * ``"learned"``: N (a, e) pairs as parameters, starting on that circle, shared by every object and trained
   by backpropagation through the soft rasterizer (camera ``look_at`` → projection → soft silhouette);
 * ``"predicted"``: MVTN proper, a small point network (a shared MLP on 128 points sampled on the surface,
@@ -41,6 +43,7 @@ from dataclasses import dataclass
 import torch
 
 from ..camera import Camera, intrinsics_from_fov, look_at
+from ..mesh import Mesh
 from .data import make_dataset
 from ..inverse.metrics import sample_surface
 from .shapes import FAMILIES
@@ -48,9 +51,10 @@ from ..soft import soft_rasterize
 from ..tensors import _check_count, _check_real
 
 __all__ = ["MVTNSettings", "MultiViewClassifier", "make_mvtn_data", "view_directions", "train_mvtn",
-           "evaluate_mvtn", "plot_view_directions", "MODES"]
+           "evaluate_mvtn", "plot_view_directions", "random_rotation", "MODES"]
 
-MODES = ("fixed", "learned", "predicted")
+MODES = ("fixed", "sphere", "learned", "predicted")
+FIXED = ("fixed", "sphere")                # modes whose views never change: rendered once before training
 MAX_ELEVATION = 80.0                     # degrees: the elevation is 80° · tanh(raw), never the pole
 POINTS = 128                             # surface samples a "predicted" view network reads
 
@@ -98,11 +102,17 @@ class MultiViewClassifier(torch.nn.Module):
                                 low_open=True, high_open=True)
         _check_real(settings.distance, "distance", low=1, low_open=True)
         self.settings = settings
-        learn = settings.mode != "fixed"
-        raw = math.atanh(elevation / MAX_ELEVATION)
-        self.azimuth = torch.nn.Parameter(torch.arange(N, dtype=torch.float32) * (360.0 / N), requires_grad=learn)
-        self.elevation_raw = torch.nn.Parameter(torch.full((N,), raw, dtype=torch.float32),
-                                                requires_grad=learn and settings.mode == "learned")
+        learn = settings.mode not in FIXED
+        k = torch.arange(N, dtype=torch.float64)
+        if settings.mode == "sphere":                                  # a Fibonacci spiral over the sphere
+            azimuth = (k * 180.0 * (3 - math.sqrt(5))) % 360.0
+            e = torch.rad2deg(torch.asin(1 - (2 * k + 1) / N)).clamp(-0.95 * MAX_ELEVATION, 0.95 * MAX_ELEVATION)
+            raw = torch.atanh(e / MAX_ELEVATION)
+        else:
+            azimuth = k * (360.0 / N)
+            raw = torch.full((N,), math.atanh(elevation / MAX_ELEVATION), dtype=torch.float64)
+        self.azimuth = torch.nn.Parameter(azimuth.float(), requires_grad=learn)
+        self.elevation_raw = torch.nn.Parameter(raw.float(), requires_grad=learn and settings.mode == "learned")
         if settings.mode == "predicted":
             self.azimuth.requires_grad_(False)                         # the circle stays; offsets are learned
         with torch.random.fork_rng(devices=[]):                        # seeded weights, global state restored
@@ -174,13 +184,35 @@ class MultiViewClassifier(torch.nn.Module):
         return self.classify(self.render(meshes))
 
 
-def make_mvtn_data(n_train: int, n_test: int, *, families=None, seed: int = 0, progress: bool = False):
+def make_mvtn_data(n_train: int, n_test: int, *, families=None, seed: int = 0, rotate: bool = False,
+                   progress: bool = False):
     """(train, test) ``shape_data.ShapeSet``s of ``families`` (default: the six training families, the torus
     held out as everywhere in lecture 13), float32, different shapes (splits "train" and "test"). Only the
-    meshes and labels are used; the classifier renders its own views."""
+    meshes and labels are used; the classifier renders its own views. rotate: turn every mesh by its own
+    uniformly random rotation (``random_rotation`` seeded by the shape's seed), so the shapes no longer stand
+    upright: the case where Hamdi et al. found learned views help most."""
     families = tuple(f for f in FAMILIES if f != "torus") if families is None else families
     common = dict(families=families, seed=seed, views=1, size=8, dtype=torch.float32, progress=progress)
-    return make_dataset(n_train, split="train", **common), make_dataset(n_test, split="test", **common)
+    sets = make_dataset(n_train, split="train", **common), make_dataset(n_test, split="test", **common)
+    if not rotate:
+        return sets
+    from dataclasses import replace
+    turned = []
+    for data in sets:
+        meshes = [Mesh(m.verts @ random_rotation(int(s)).to(m.verts.dtype).T, m.faces)
+                  for m, s in zip(data.meshes, data.seeds)]
+        turned.append(replace(data, meshes=meshes))                    # the images and silhouettes are unused
+    return tuple(turned)
+
+
+def random_rotation(seed: int) -> torch.Tensor:
+    """(3, 3) float64 a rotation drawn uniformly (Haar measure) with ``seed``: a unit quaternion from four
+    normal draws (Shoemake), turned into its matrix."""
+    q = torch.randn(4, generator=torch.Generator().manual_seed(int(seed) % (2 ** 63)), dtype=torch.float64)
+    w, x, y, z = (q / q.norm()).tolist()
+    return torch.tensor([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]], dtype=torch.float64)
 
 
 def train_mvtn(train, *, settings: MVTNSettings = MVTNSettings(), steps: int = 150, batch: int = 24,
@@ -189,8 +221,8 @@ def train_mvtn(train, *, settings: MVTNSettings = MVTNSettings(), steps: int = 1
     """(model, losses): Adam on the cross-entropy of the ShapeSet ``train``'s labels, ``steps`` batches of
     ``batch`` shapes (shuffled epochs, seeded by ``seed``). In mode "learned" the angles learn at their own
     rate, about ``view_lr`` degrees a step at most (Adam's step is about its rate whatever the gradient's
-    scale); ``lr`` for every other weight (the view network's too). In mode "fixed" the silhouettes are
-    rendered once, before training."""
+    scale); ``lr`` for every other weight (the view network's too). In modes "fixed" and "sphere" the
+    silhouettes are rendered once, before training."""
     steps, batch = _check_count(steps, "steps", minimum=0), _check_count(batch, "batch")
     lr, view_lr = _check_real(lr, "lr", low=0, low_open=True), _check_real(view_lr, "view_lr", low=0)
     if settings.classes != len(train.families):
@@ -203,7 +235,7 @@ def train_mvtn(train, *, settings: MVTNSettings = MVTNSettings(), steps: int = 1
                    dict(params=[model.elevation_raw], lr=view_lr / 60)]
     optimizer = torch.optim.Adam(groups)
     fixed = None
-    if settings.mode == "fixed":
+    if settings.mode in FIXED:
         with torch.no_grad():
             fixed = model.render(train.meshes)                         # (N_shapes, N, H, W) once
     g = torch.Generator().manual_seed(_check_count(seed, "seed", minimum=0))
