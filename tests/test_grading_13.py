@@ -1,5 +1,6 @@
 """Lecture 13's graded tasks (course/grading/lecture13.py): the references agree with the package
-(course.learning.data.voxel_iou and view_cameras, course.inverse.losses.silhouette_iou_loss), they score full marks, a
+(course.learning.data.voxel_iou and view_cameras, course.inverse.losses.silhouette_iou_loss; 13.5's views are the
+data's), they score full marks, a
 solution written as a student would scores full marks without calling them, typical mistakes lose points with
 the diagnosis a student can act on, and calling the package scores 0."""
 import math
@@ -14,7 +15,8 @@ from grading_contract import contract
 REFERENCES = {"13.1": lambda a, b: lecture13._voxel(a, b),
               "13.2": lambda p, t: lecture13._multiview(p, t),
               "13.3": lambda a, e, d: lecture13._eyes(a, e, d),
-              "13.4": lambda m, o, x, y, f: lecture13._train(m, o, x, y, f)}
+              "13.4": lambda m, o, x, y, f: lecture13._train(m, o, x, y, f),
+              "13.5": lambda s, c, p: lecture13._hull(s, c, p)}
 
 
 # ------------------------------------------------------------------------------ solutions, as students write
@@ -51,7 +53,21 @@ def train_step(model, optimizer, inputs, targets, loss_fn):
     return loss.item()
 
 
-SOLUTIONS = {"13.1": voxel_iou, "13.2": multiview_iou_loss, "13.3": view_eyes, "13.4": train_step}
+def visual_hull(silhouettes, cameras, points):
+    inside = torch.ones(len(points), dtype=torch.bool)
+    for sil, camera in zip(silhouettes, cameras):
+        xy, depth = camera.project(points)
+        j, i = torch.floor(xy[:, 0]), torch.floor(xy[:, 1])
+        # outside the image or behind the camera: outside this view's cone, so outside the hull
+        ok = (depth > 0) & (j >= 0) & (j < camera.width) & (i >= 0) & (i < camera.height)
+        seen = torch.zeros(len(points), dtype=torch.bool)
+        seen[ok] = sil[i[ok].long(), j[ok].long()] > 0.5
+        inside = inside & seen
+    return inside
+
+
+SOLUTIONS = {"13.1": voxel_iou, "13.2": multiview_iou_loss, "13.3": view_eyes, "13.4": train_step,
+             "13.5": visual_hull}
 
 
 # ------------------------------------------------------------------------------------- typical mistakes
@@ -88,14 +104,35 @@ MISTAKES = [
     ("13.4", lambda m, o, x, y, f: lecture13._train(m, o, x, y, f, "no_zero"), 1, ["zero_grad"]),
     ("13.4", lambda m, o, x, y, f: lecture13._train(m, o, x, y, f, "no_step"), 0, ["optimizer.step()"]),
     ("13.4", lambda m, o, x, y, f: lecture13._train(m, o, x, y, f, "after"), 0, ["before"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "round"), 0, ["floor(x)"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "swap"), 0, ["swapped"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "union"), 2, ["*every* view"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "keep_outside"), 2, ["cannot place in its image"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "clamp"), 2, ["nearest border pixel"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p, "no_depth"), 3, ["behind a camera"]),
+    ("13.5", lambda s, c, p: lecture13._hull(s, c, p).long(), 0, ["bool tensor"]),
 ]
 
 (test_the_reference_scores_full_marks, test_a_students_solution_scores_full_marks,
  test_a_typical_mistake_loses_points_with_a_useful_message) = contract(REFERENCES, SOLUTIONS, MISTAKES)
 
 
-def test_lecture_13_has_four_tasks():
-    assert [t.id for t in tasks_for_lecture(13)] == ["13.1", "13.2", "13.3", "13.4"]
+def test_lecture_13_has_five_tasks_and_the_one_that_needs_thought_weighs_most():
+    tasks = tasks_for_lecture(13)
+    assert [t.id for t in tasks] == ["13.1", "13.2", "13.3", "13.4", "13.5"]
+    assert tasks[-1].points > max(t.points for t in tasks[:-1])
+
+
+def test_the_hull_checks_views_are_the_datas_and_the_hull_contains_the_balls():
+    from course.learning.data import view_cameras
+    cameras, silhouettes, grid = lecture13._hull_shapes()
+    for mine, data in zip(cameras, view_cameras(8, size=32, dtype=torch.float64)):
+        assert torch.allclose(mine.R, data.R, atol=1e-12) and torch.allclose(mine.t, data.t, atol=1e-12)
+        assert torch.allclose(mine.K, data.K, atol=1e-12)
+    hull = lecture13.visual_hull_reference(silhouettes["a ball"], cameras, grid)
+    ball = ((grid - torch.tensor([0.1, 0.0, -0.05], dtype=torch.float64)).norm(dim=1) < 0.75)
+    assert hull.sum() >= 0.9 * ball.sum() and hull.sum() < 1.6 * ball.sum()  # the hull: about the ball, a bit more
+    assert not (hull & ((grid - torch.tensor([0.1, 0.0, -0.05], dtype=torch.float64)).norm(dim=1) > 1.2)).any()
 
 
 def test_the_references_are_the_package():

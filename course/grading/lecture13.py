@@ -1,5 +1,5 @@
 """The checks of lecture 13's graded tasks (learning through the renderer): 13.1 voxel_iou,
-13.2 multiview_iou_loss, 13.3 view_eyes, 13.4 train_step.
+13.2 multiview_iou_loss, 13.3 view_eyes, 13.4 train_step, 13.5 visual_hull.
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
@@ -15,25 +15,34 @@ module, which registers its checks in ``course.grading.TASKS``.
   in degrees, times the distance).
 * 13.4, one training step: clear the gradients, forward, loss, backward, step; return the loss before the step
   as a float.
+* 13.5, the visual hull of a shape's views (what silhouette supervision can pin down at best): a point is in it
+  when every view sees it inside the silhouette. The student decides, and the check tests, which pixel a
+  projected point falls in (floor, the course's pixel convention) and what a point is that a view cannot place
+  in its image or that lies behind its camera (outside that view's cone: outside the hull).
 
 The references are written here, in float64; ``tests/test_grading_13.py`` checks that they agree with the
 package. A graded function that calls them, or the package functions doing the task's work, scores 0.
 """
 from __future__ import annotations
 
+import math
+from functools import cache
+
 import torch
 
 from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
-__all__ = ["voxel_iou_reference", "multiview_iou_loss_reference", "view_eyes_reference", "train_step_reference"]
+__all__ = ["voxel_iou_reference", "multiview_iou_loss_reference", "view_eyes_reference", "train_step_reference",
+           "visual_hull_reference"]
 
 FORBIDDEN = [("course.learning.data", "voxel_iou"), ("course.inverse.losses", "silhouette_iou_loss"),
              ("course.learning.mvtn", "view_directions"),
              ("course.grading.lecture13", "voxel_iou_reference"),
              ("course.grading.lecture13", "multiview_iou_loss_reference"),
              ("course.grading.lecture13", "view_eyes_reference"),
-             ("course.grading.lecture13", "train_step_reference")]
+             ("course.grading.lecture13", "train_step_reference"),
+             ("course.grading.lecture13", "visual_hull_reference")]
 
 
 # ------------------------------------------------------------------------------------- the references
@@ -376,3 +385,174 @@ def _check_train(impl):
         require(_train_problem(impl, "sgd", 3))
         require(_train_problem(impl, "adam", 3))
     return grade_parts((1, "one step", one), (1, "several steps, SGD and Adam", several))
+
+
+# ----------------------------------------------------------------------------------- 13.5 visual_hull
+
+def visual_hull_reference(silhouettes, cameras, points) -> torch.Tensor:
+    """13.5: (N,) bool, True where a point falls inside the silhouette in every view: the pixel it falls in is
+    (row floor(y), column floor(x)) of its projection; a point outside a view's image or behind its camera
+    (depth <= 0) is outside that view's cone, so outside the hull."""
+    return _hull(silhouettes, cameras, points)
+
+
+def _hull(silhouettes, cameras, points, kind="course"):
+    return _hulls(silhouettes, cameras, points, (kind,))[kind]
+
+
+def _hulls(silhouettes, cameras, points, kinds):
+    """{kind: (N,) bool} the hull, and the typical mistakes' answers (``_HULL_MISTAKES``), projecting once a view."""
+    sil = torch.as_tensor(silhouettes)
+    points = torch.as_tensor(points)
+    N = points.shape[0]
+    inside = {k: torch.zeros(N, dtype=torch.bool) if k == "union" else torch.ones(N, dtype=torch.bool) for k in kinds}
+    for view, camera in enumerate(cameras):
+        xy, depth = camera.project(points.to(camera.K.dtype))
+        H, W = int(camera.height), int(camera.width)
+        mask = sil[view] if sil.dtype == torch.bool else sil[view] > 0.5
+        front = depth > 0
+        for kind in kinds:
+            pick = torch.round if kind == "round" else torch.floor         # round: the nearest integer, not the pixel
+            col, row = pick(xy[:, 0]), pick(xy[:, 1])
+            finite = torch.isfinite(col) & torch.isfinite(row)
+            col = torch.where(finite, col, torch.full_like(col, -1)).clamp(-1, max(H, W) + 1).long()
+            row = torch.where(finite, row, torch.full_like(row, -1)).clamp(-1, max(H, W) + 1).long()
+            if kind == "swap":
+                row, col = col, row
+            frame = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+            if kind == "clamp":                                             # off the frame: the border pixel
+                col, row = col.clamp(0, W - 1), row.clamp(0, H - 1)
+            seen = (frame | (kind == "clamp")) & (front | (kind == "no_depth"))
+            in_view = torch.zeros(N, dtype=torch.bool)
+            in_view[seen] = mask[row[seen], col[seen]]
+            if kind == "keep_outside":                                      # a view that can't place it: kept
+                in_view = in_view | ~frame
+            inside[kind] = inside[kind] | in_view if kind == "union" else inside[kind] & in_view
+    return inside
+
+
+_HULL_MISTAKES = [
+    ("round", "a point falls in the pixel that contains it: pixel (row i, column j) covers [j, j+1) × [i, i+1), "
+              "so take floor(x) and floor(y); rounding picks a pixel half a pixel off"),
+    ("swap", "rows and columns are swapped: the projection gives (x, y) = (column, row), and the silhouette is "
+             "indexed [row, column], i.e. [floor(y), floor(x)]"),
+    ("union", "a point is in the hull when *every* view sees it inside the silhouette (an intersection of "
+              "cones); yours keeps a point that *any* view sees inside"),
+    ("keep_outside", "a point outside a view's image was kept: the views frame the whole shape, so a point a view "
+                     "cannot place in its image is outside that view's cone, and outside the hull"),
+    ("clamp", "a point outside a view's image was read at the nearest border pixel: it is outside that view's "
+              "cone, so outside the hull, whatever the border pixel says"),
+    ("no_depth", "points behind a camera (depth <= 0) were projected anyway: dividing by a negative depth flips "
+                 "them into the image, but a camera sees nothing behind it: such a point is outside its cone"),
+]
+
+
+def _look(eye, size=(16, 16), fov=40.0, dtype=torch.float64):
+    from course.camera import Camera
+    return Camera.look_at(eye, (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), fov_y=fov, width=size[1], height=size[0],
+                          dtype=dtype)
+
+
+def _hull_problem(impl, label, silhouettes, cameras, points):
+    name = f"visual_hull({label})"
+    out = _call(impl, silhouettes, list(cameras), points)
+    got = to_tensor(out, name)
+    expected = _hull(silhouettes, cameras, points)
+    if tuple(got.shape) != tuple(expected.shape):
+        return f"{name}: shape ({expected.shape[0]},) expected, one answer per point, got {tuple(got.shape)}"
+    if got.dtype != torch.bool:
+        return f"{name}: return a bool tensor (True inside the hull), got {str(got.dtype).replace('torch.', '')}"
+    if torch.equal(got, expected):
+        return None
+    answers = _hulls(silhouettes, cameras, points, tuple(kind for kind, _ in _HULL_MISTAKES))
+    variants = [(kind, answers[kind], why) for kind, why in _HULL_MISTAKES]
+    telling = [(v, why) for kind, v, why in variants
+               if not torch.equal(v, expected) and sum(torch.equal(v, w) for _, w, _ in variants) == 1]
+    for v, why in telling:
+        if torch.equal(got, v):
+            return f"{name}: {why}"
+    wrong = int((got != expected).sum())
+    first = int((got != expected).nonzero()[0, 0])
+    return (f"{name}: {wrong} of {expected.numel()} points wrong (first: point {first}, got {bool(got[first])}, "
+            f"expected {bool(expected[first])})")
+
+
+def _random_points(seed, n, low, high, dtype=torch.float64):
+    g = generator(seed)
+    low, high = torch.tensor(low, dtype=dtype), torch.tensor(high, dtype=dtype)
+    return low + (high - low) * torch.rand(n, 3, generator=g, dtype=dtype)
+
+
+def _random_mask(seed, shape, fill):
+    return (torch.rand(shape, generator=generator(seed)) < fill).to(torch.float64)
+
+
+def _balls_silhouettes(cameras, balls):
+    """(V, H, W) float64: 1 where the ray through a pixel centre meets one of ``balls`` ((centre, radius) pairs)."""
+    sils = []
+    for camera in cameras:
+        origins, directions = camera.rays()                                 # (H, W, 3) each, unit directions
+        hit = torch.zeros(origins.shape[:2], dtype=torch.bool)
+        for centre, radius in balls:
+            oc = origins - torch.tensor(centre, dtype=origins.dtype)
+            b = (oc * directions).sum(-1)
+            hit |= (b * b - (oc * oc).sum(-1) + radius ** 2 >= 0) & (b <= 0)   # in front of the camera
+        sils.append(hit.to(torch.float64))
+    return torch.stack(sils)
+
+
+@cache
+def _hull_shapes():
+    """The course's 8 data views (``learning.data.view_cameras(8)``: 30° up, 3.2 away, 32 px), the silhouettes of a ball and of two
+    balls seen through them (exact, ray by ray), and a 10³ grid of points over [-1, 1]³."""
+    golden = 180.0 * (3 - 5 ** 0.5)                                         # the golden angle, degrees
+    cameras = [_look(_eyes(torch.tensor(math.radians(k * golden), dtype=torch.float64),
+                           torch.tensor(math.radians(30.0), dtype=torch.float64), 3.2).tolist(),
+                     size=(32, 32)) for k in range(8)]                      # as learning.data.view_cameras(8)
+    shapes = {"a ball": [((0.1, 0.0, -0.05), 0.75)],
+              "two balls": [((-0.45, 0.1, 0.0), 0.45), ((0.4, -0.2, 0.2), 0.5)]}
+    c = -1 + (torch.arange(10, dtype=torch.float64) + 0.5) * (2 / 10)
+    grid = torch.stack(torch.meshgrid(c, c, c, indexing="ij"), -1).reshape(-1, 3)
+    return cameras, {name: _balls_silhouettes(cameras, balls) for name, balls in shapes.items()}, grid
+
+
+@task("13.5", "visual_hull", points=4, reference=("course.grading.lecture13", "visual_hull_reference"))
+def _check_hull(impl):
+    forbidden = forbidden_call(impl, "visual_hull", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+
+    def one_view():
+        camera = _look((0.0, 0.0, 3.0))
+        points = _random_points(1351, 300, (-0.9, -0.9, -0.5), (0.9, 0.9, 0.5))
+        require(_hull_problem(impl, "one view of a random 16 × 16 silhouette", _random_mask(1352, (1, 16, 16), 0.5),
+                              [camera], points))
+
+    def several():
+        cameras = [_look((0.0, 0.0, 3.0)), _look((3.0, 0.0, 0.0)), _look((0.0, 3.0, 0.01))]
+        points = _random_points(1353, 400, (-0.9, -0.9, -0.9), (0.9, 0.9, 0.9))
+        require(_hull_problem(impl, "three views of random silhouettes", _random_mask(1354, (3, 16, 16), 0.7),
+                              cameras, points))
+
+    def unseen():
+        wide = _random_points(1355, 400, (-2.5, -2.5, -2.5), (2.5, 2.5, 2.5))
+        full = torch.ones(1, 12, 16, dtype=torch.float64)
+        require(_hull_problem(impl, "points outside a 12 × 16 image, a silhouette that fills it", full,
+                              [_look((0.0, 0.3, 3.0), size=(12, 16), fov=30.0)], wide))
+        border = torch.zeros(1, 12, 16, dtype=torch.float64)
+        border[:, 0], border[:, -1], border[:, :, 0], border[:, :, -1] = 1, 1, 1, 1
+        require(_hull_problem(impl, "points outside the image, a silhouette on its border", border,
+                              [_look((0.0, 0.3, 3.0), size=(12, 16), fov=30.0)], wide))
+        require(_hull_problem(impl, "a camera among the points (some behind it)", full,
+                              [_look((0.0, 0.2, 1.2), size=(12, 16), fov=90.0)], wide))
+
+    def shapes():
+        cameras, silhouettes, grid = _hull_shapes()
+        for name, sils in silhouettes.items():
+            require(_hull_problem(impl, f"{name} seen by the course's 8 views at 32 px", sils, cameras, grid))
+        sils = silhouettes["two balls"]
+        require(_hull_problem(impl, "bool silhouettes", sils.bool(), cameras, grid))
+        require(_hull_problem(impl, "float32 points", sils, cameras, grid.float()))
+        require(_hull_problem(impl, "no points", sils, cameras, torch.zeros(0, 3, dtype=torch.float64)))
+    return grade_parts((1, "one view: which pixel", one_view), (1, "several views: all of them", several),
+                       (1, "points a view cannot place", unseen), (1, "the course's views, bool, no points", shapes))
