@@ -102,6 +102,30 @@ def test_lectures_05_07_08_colour_scales_and_legends():
     plt.close("all")
 
 
+@pytest.mark.parametrize("draw, values", [(E.draw_edge, dict(offset=0.1, angle=-40.0)),
+                                           (E.draw_finite_difference, dict(log_step=-8.0)),
+                                           (E.draw_edge_sampling, dict(log_samples=1.0)),
+                                           (E.draw_fit, dict(step=5)), (E.draw_loss_landscape, {})])
+def test_lectures_09_10_figures_carry_the_line_of_their_current_values(draw, values):
+    for kwargs in ({}, values):                                             # the defaults, then moved controls
+        out = draw(**kwargs)
+        texts = [t.get_text().replace("\n", " ") for t in plt.gcf().texts]
+        assert out["line"] in texts, (kwargs, texts)
+        plt.close("all")
+
+
+def test_lecture_10_landscape_and_fit_say_where_the_loss_is_lowest():
+    out = E.draw_loss_landscape()                                           # sigma 1e-4, a 3-degree grid
+    assert out["lowest"] == 0.0 and out["end"] == 0.0 and out["loss30"] > out["loss0"]
+    assert len(plt.gcf().axes[0].lines[0].get_xdata()) == 61
+    plt.close("all")
+    out = E.draw_fit()                                                      # the overshoot: lowest at step 17
+    ax = plt.gcf().axes[2]
+    assert ax.get_ylabel() == "loss (× 1e-3)" and ax.get_legend().get_texts()[0].get_text() == "lowest so far: step 17"
+    assert out["phi"] < 0
+    plt.close("all")
+
+
 @pytest.mark.parametrize("draw, values, words", [
     (E.draw_fill_rule, dict(x=-1.0), "x must be a number in [0.0, 8]"),
     (E.draw_supersampling, dict(shape="cube"), "shape must be one of ['sliver', 'teapot']"),

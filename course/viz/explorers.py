@@ -500,7 +500,9 @@ def draw_edge(offset: float = 0.5, angle: float = 20.0) -> dict:
     The derivative of the area is the length of the edge inside the pixel times how fast it moves along its
     normal (cos of the tilt), the Reynolds transport theorem in one pixel; it is zero when the edge misses the
     pixel and largest when it crosses it through the middle. Autograd through the box-filtered area gives the
-    same number; a one-sample-per-pixel image would have derivative 0 everywhere, and a jump.
+    same number; a one-sample-per-pixel image would have derivative 0 everywhere, and a jump. The covered part
+    of the pixel is shaded; the line printed under the figure is the one the explorer cell prints for its
+    defaults.
     """
     from ..coverage import halfplane_pixel_area
     offset, angle = _check_range("offset", offset, -1.0, 2.0), _check_range("angle", angle, -60.0, 60.0)
@@ -519,21 +521,26 @@ def draw_edge(offset: float = 0.5, angle: float = 20.0) -> dict:
     boundary = _segment_in_pixel((offset, 0.5), (-math.sin(th), math.cos(th))) * n[0]
     xs, ys = np.linspace(-1.0, 2.0, 121), np.linspace(0.0, 1.0, 401)[:, None]   # rows of the pixel, for the curve
     curve = np.clip(xs + math.tan(th) * (0.5 - ys), 0.0, 1.0).mean(0)     # ∫ width left of the edge dy
-    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.6))
+    line = (f"offset {offset:g}, tilt {angle:g} deg: coverage {_r4(a)}, boundary term {_r4(boundary)}, "
+            f"autograd {_r4(autograd)}")
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.0))
     ax = axes[0]
+    u = (np.arange(200) + 0.5) / 200                                        # the pixel, 200 x 200 points
+    covered = (n[0] * (u[None, :] - offset) + n[1] * (u[:, None] - 0.5)) <= 0   # left of the edge
+    ax.imshow(np.where(covered, 1.0, np.nan), extent=(0, 1, 1, 0), cmap="Blues", vmin=0, vmax=2)
     ax.add_patch(plt.Rectangle((0, 0), 1, 1, fill=False, lw=1.5))
     s = np.linspace(-2, 2, 2)
     ax.plot(offset - s * math.sin(th), 0.5 + s * math.cos(th), color="tab:red", label="the edge")
     ax.set_xlim(-1, 2), ax.set_ylim(2, -1), ax.set_aspect("equal"), ax.set_xticks([]), ax.set_yticks([])
-    ax.set_title(f"coverage {float(a):.3f}", fontsize=10)
-    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(f"the pixel: coverage {float(a):.3f}", fontsize=10)
+    ax.legend(handles=[ax.lines[0], matplotlib.patches.Patch(color=matplotlib.colormaps["Blues"](0.5), label="covered")],
+              loc="lower right", fontsize=8)
     axes[1].plot(xs, curve, label="coverage")
     axes[1].plot(xs, np.gradient(curve, xs), "--", label="d coverage / d offset")
     axes[1].plot([offset], [boundary], "o", color="tab:red", label=f"boundary term {boundary:.3f}")
     axes[1].set_xlabel("edge offset (px)"), axes[1].legend(fontsize=8)
-    fig.subplots_adjust(left=0.04, right=0.98, bottom=0.14, top=0.9, wspace=0.25)
-    line = (f"offset {offset:g}, tilt {angle:g} deg: coverage {_r4(a)}, boundary term {_r4(boundary)}, "
-            f"autograd {_r4(autograd)}")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.subplots_adjust(left=0.04, right=0.98, bottom=0.2, top=0.92, wspace=0.25)
     return dict(coverage=float(a), boundary=boundary, autograd=float(autograd), line=line)
 
 
@@ -596,7 +603,11 @@ def draw_finite_difference(log_step: float = -5.0) -> dict:
 
     Too large a step and the difference quotient averages over the changing slope (error ~ h², and worse
     where an edge crosses a pixel corner within h); too small and rounding wins (error ~ ε / h). The best step
-    sits in between, near ε^(1/3): about 1e-5 in float64, 1e-2 in float32, where no step is good.
+    sits in between, at (3 δL / |L‴|)^(1/3) with δL the rounding error of L: here the step is in pixels and
+    L‴ is of order one, so it lands near ε^(1/3), at 1e-5 in float64 (error 6e-11) and 1e-2 in float32 (error
+    2e-5, over 1e5 times float64's best). (Lecture 09's sphere moves a vertex in world units, 13 pixels
+    each: its L‴ is large and its best float64 step smaller, 1e-6.) The line printed under the figure is the
+    one the explorer cell prints for its defaults.
     """
     log_step = _check_range("log_step", log_step, -12.0, -1.0)
     logs, curves = _fd_curve()
@@ -608,9 +619,10 @@ def draw_finite_difference(log_step: float = -5.0) -> dict:
     ax.set_xlabel("step h (px)"), ax.set_ylabel("relative error"), ax.legend(fontsize=8)
     ax.set_title(f"h = 1e{log_step:g}: error {_sig(now['float64'])} (float64), {_sig(now['float32'])} (float32)",
                  fontsize=10)
-    fig.tight_layout()
     line = (f"step 1e{log_step:g}: central difference {_r4(_fd_estimate(log_step, F64))} in float64, "
             f"exact {_r4(_fd_exact())}")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     return dict(float64=now["float64"], float32=now["float32"], line=line)
 
 
@@ -636,7 +648,8 @@ def draw_edge_sampling(log_samples: float = 2.0) -> dict:
     (each n computed once): each run's estimate (dots) and their spread, against the exact gradient (the line).
 
     The estimate is unbiased: the runs scatter around the exact value at every n, and their spread falls
-    like 1/√n (ten times the samples, about a third of the spread).
+    like 1/√n (ten times the samples, about a third of the spread). The line printed under the figure is the
+    one the explorer cell prints for its defaults.
     """
     log_samples = _check_range("log_samples", log_samples, 1.0, 3.5)
     n = int(round(10.0 ** log_samples))
@@ -651,8 +664,9 @@ def draw_edge_sampling(log_samples: float = 2.0) -> dict:
     ax.set_xlim(exact - 1.2, exact + 1.2)
     ax.set_title(f"{n} edge samples, {EDGE_RUNS} seeds: spread {_sig(spread)}", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
     line = f"{n} samples: exact {_r4(exact)}, mean of {EDGE_RUNS} runs {_r4(runs.mean())}, spread {_sig(spread)}"
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     return dict(exact=exact, mean=float(runs.mean()), spread=spread, line=line)
 
 
@@ -707,19 +721,26 @@ def _fit_snapshots(sigma: float = 1e-4):
 def draw_fit(step: int = FIT_STEPS) -> dict:
     """A camera fit scrubbed step by step (the snapshots are computed once): the soft image at ``step``, the
     target, and the loss so far. The pose is one angle φ about the vertical, 30° off at the start; Adam follows
-    the soft rasterizer's gradient (σ = 1e-4) back toward 0°.
+    the soft rasterizer's gradient (σ = 1e-4) back toward 0°. Its momentum carries φ past the answer: the loss
+    is lowest at step 17 (φ = 0.2°) and rises again as φ overshoots to -3.3° at step 20 (the dot marks the
+    lowest loss so far). The line printed under the figure is the one the explorer cell prints for its defaults.
     """
     step = int(_check_range("step", step, 0, FIT_STEPS))
     snaps = _fit_snapshots()
     phi, loss, image = snaps[step]
-    fig, axes = plt.subplots(1, 3, figsize=(9.0, 3.0))
+    losses = [s[1] * 1e3 for s in snaps[:step + 1]]                         # in units of 1e-3
+    best = int(np.argmin(losses))
+    line = f"step {step}: angle {phi:.2f} deg, loss {_sig(loss)}"
+    fig, axes = plt.subplots(1, 3, figsize=(10.0, 3.6))
     show_image(image, f"step {step}: φ = {phi:.1f}°", ax=axes[0])
     show_image(_pose_problem()[3], "target (φ = 0°)", ax=axes[1])
-    axes[2].plot([s[1] for s in snaps[:step + 1]], marker=".")                # linear: no log-tick text to typeset
-    axes[2].set_ylim(0, 1.05 * max(s[1] for s in snaps)), axes[2].set_yticks([])
-    axes[2].set_xlim(0, FIT_STEPS), axes[2].set_xlabel("step"), axes[2].set_title("loss", fontsize=10)
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.16, top=0.88, wspace=0.15)
-    line = f"step {step}: angle {phi:.2f} deg, loss {_sig(loss)}"
+    axes[2].plot(losses, marker=".")                                        # linear: no log-tick text to typeset
+    axes[2].plot([best], [losses[best]], "o", color="tab:red", label=f"lowest so far: step {best}")
+    axes[2].set_ylim(0, 1.05e3 * max(s[1] for s in snaps)), axes[2].legend(fontsize=8, loc="upper right")
+    axes[2].set_xlim(0, FIT_STEPS), axes[2].set_xlabel("step"), axes[2].set_ylabel("loss (× 1e-3)")
+    axes[2].set_title("L2 loss", fontsize=10)
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.2, top=0.9, wspace=0.25)
     return dict(phi=phi, loss=loss, line=line)
 
 
@@ -729,9 +750,12 @@ def fit_explorer() -> None:
     _show(draw_fit)
 
 
+LANDSCAPE_STEP = 3.0        # degrees between the samples of a landscape, as lecture 10's whole-orbit curve
+
+
 @cache
 def _landscape(sigma: float):
-    degrees = np.linspace(-90.0, 90.0, 25)
+    degrees = np.arange(-90.0, 90.0 + LANDSCAPE_STEP / 2, LANDSCAPE_STEP)
     target = _pose_problem()[3]
     with torch.no_grad():
         loss = [float(((_orbit_render(math.radians(d), sigma) - target) ** 2).mean()) for d in degrees]
@@ -739,27 +763,43 @@ def _landscape(sigma: float):
 
 
 def draw_loss_landscape(sigma: float = 1e-4) -> dict:
-    """The loss of the camera fit along the pose angle φ (from -90° to 90°, the target at 0°), rendered soft
-    with ``sigma`` (each curve is computed once).
+    """The loss of the camera fit along the pose angle φ (from -90° to 90° every 3°, the target at 0°),
+    rendered soft with ``sigma`` (each curve is computed once), and where a walk downhill along the curve from
+    the fit's start (30°) ends.
 
-    A small σ gives a nearly hard image: a sharp minimum at 0°, a landscape with kinks. A larger σ blurs the
-    teapot and smooths the landscape, at a price: the blurred image no longer matches the (sharp) target
-    anywhere, and at σ = 1e-3 the minimum has moved off 0°, so a fit would converge to the wrong pose.
+    At σ = 1e-5 and 1e-4 the soft image is nearly the hard one: the lowest point is at the answer, and the
+    answer's valley reaches the start (the walk from 30° ends at 0°); the other valleys lie 60° or more from
+    the start (-33° and 87° at σ = 1e-5, -57° at 1e-4). At σ = 1e-3 the blurred teapot matches the sharp target nowhere: the lowest point has moved to
+    12°, the valley is shallower, and it has small bumps on the way (the walk from 30° stops at once). A 3°
+    grid, like lecture 10's whole-orbit curve, is far too coarse to show the steps of the hard loss (lecture
+    10's close-up samples every 0.01°). The line printed under the figure is the one the explorer cell prints
+    for its defaults.
     """
     sigma = _check_choice("sigma", sigma, SIGMAS)
-    fig, ax = plt.subplots(figsize=(5.8, 3.6))
     degrees, loss = _landscape(sigma)
-    ax.plot(degrees, loss, marker=".", label=f"σ = {sigma:g}")
-    ax.axvline(0.0, color="0.6", ls=":")
+    i0, i30, low = int(np.argmin(np.abs(degrees))), int(np.argmin(np.abs(degrees - 30.0))), int(np.argmin(loss))
+    end = i30
+    while True:                                                             # downhill, one grid step at a time
+        nxt = min((k for k in (end - 1, end + 1) if 0 <= k < len(loss)), key=lambda k: loss[k])
+        if loss[nxt] >= loss[end]:
+            break
+        end = nxt
+    line = (f"sigma {sigma:g}: lowest at {degrees[low]:g} deg, loss at 0 deg {_sig(loss[i0])}, at 30 deg "
+            f"{_sig(loss[i30])}; downhill from 30 deg ends at {degrees[end]:g} deg")
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    ax.plot(degrees, loss * 1e3, marker=".", label=f"σ = {sigma:g}")
+    ax.axvline(0.0, color="0.6", ls=":", label="the answer")
     ax.axvline(30.0, color="tab:green", ls=":", label="the fit's start")
-    ax.set_xlabel("pose angle φ (degrees)"), ax.set_ylabel("L2 loss"), ax.legend(fontsize=8)
-    slope = np.gradient(loss, degrees)
+    a, b = sorted((i30, end))
+    ax.plot(degrees[a:b + 1], loss[a:b + 1] * 1e3, color="tab:red", lw=2.5, alpha=0.6,
+            label=f"downhill from 30°: ends at {degrees[end]:g}°")
+    ax.plot([degrees[low]], [loss[low] * 1e3], "v", color="k", label=f"lowest: {degrees[low]:g}°")
+    ax.set_xlabel("pose angle φ (degrees)"), ax.set_ylabel("L2 loss (× 1e-3)"), ax.legend(fontsize=8)
     ax.set_title(f"loss along φ, σ = {sigma:g}", fontsize=10)
-    fig.tight_layout()
-    i30 = int(np.argmin(np.abs(degrees - 30.0)))
-    line = f"sigma {sigma:g}: loss at 0 deg {_sig(loss[12])}, at 30 deg {_sig(loss[i30])}, slope at 30 deg " \
-           f"{_sig(slope[i30])} per degree"
-    return dict(loss0=float(loss[12]), loss30=float(loss[i30]), slope30=float(slope[i30]), line=line)
+    fig.text(0.5, 0.01, line.replace("; ", ";\n"), ha="center", va="bottom", fontsize=9)   # the printed line
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    return dict(lowest=float(degrees[low]), loss0=float(loss[i0]), loss30=float(loss[i30]),
+                end=float(degrees[end]), line=line)
 
 
 def loss_landscape_explorer() -> None:
