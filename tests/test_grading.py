@@ -54,6 +54,7 @@ NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": 
          "9.1": "best_step", "9.2": "boundary_term", "9.3": "triangle_term", "9.4": "edge_sample",
          "10.1": "silhouette_iou_loss", "10.2": "smoothness_loss", "10.3": "fit_pose", "10.4": "staircase",
          "11.1": "gram_matrix", "11.2": "style_loss", "11.3": "random_directions", "11.4": "deep_dream_step",
+         "11.5": "compare_runs",
          "12.1": "project_onto_plane", "12.2": "shadow_velocity", "12.3": "variance_lit", "12.4": "light_step",
          "12.5": "tight_distribution",
          "13.1": "voxel_iou", "13.2": "multiview_iou_loss", "13.3": "view_eyes", "13.4": "train_step"}

@@ -55,6 +55,23 @@ def test_the_soft_textured_image_approaches_the_hard_one_and_differentiates_both
     assert torch.allclose(background[0, 0], torch.tensor([0.2, 0.3, 0.4], dtype=torch.float64), atol=1e-6)
 
 
+def test_the_nmr_textured_image_is_the_z_buffers_and_adds_an_edge_gradient():
+    """Kato et al.'s renderer: the forward pass is the z-buffer's image, bit for bit; the texture's gradient is
+    the z-buffer's; the vertices get more than the z-buffer gives them (the edge terms), and only there."""
+    mesh, cam, texture = _scene()
+    grads = {}
+    for renderer in ("hard", "nmr"):
+        v = mesh.verts.clone().requires_grad_(True)
+        t = texture.clone().requires_grad_(True)
+        image = render_texture(v, mesh.faces, mesh.uvs, t, cam, renderer=renderer, background=(0.2, 0.3, 0.4))
+        (image * torch.linspace(0, 1, 3, dtype=torch.float64)).sum().backward()
+        grads[renderer] = (image.detach(), v.grad, t.grad)
+    assert torch.equal(grads["hard"][0], grads["nmr"][0])
+    assert torch.allclose(grads["hard"][2], grads["nmr"][2], rtol=0, atol=1e-12)
+    extra = (grads["nmr"][1] - grads["hard"][1]).norm(dim=1)
+    assert torch.isfinite(extra).all() and float(extra.max()) > 1e-3
+
+
 def test_style_transfer_lowers_the_style_loss_and_keeps_the_shape():
     """A short seeded run: the style term falls, the vertices move a little (the content term), and the same
     seed gives the same run; with geometry=False the vertices stay put."""
@@ -70,6 +87,31 @@ def test_style_transfer_lowers_the_style_loss_and_keeps_the_shape():
     assert torch.equal(again.verts, run.verts) and torch.equal(again.texture, run.texture)
     still = stylize_mesh(mesh, stripes(32), steps=3, size=32, texture_size=16, network=net, geometry=False)
     assert torch.equal(still.verts, mesh.verts.double())
+    kato = stylize_mesh(mesh, stripes(32), steps=3, size=32, texture_size=16, network=net, renderer="nmr")
+    assert 0 < float((kato.verts - mesh.verts).norm(dim=1).max()) < 0.1
+
+
+def test_the_style_bench_compares_every_way_seed_by_seed():
+    """``course.bench.style``: every way of WAYS from a seed, judged twice (a small network and tiny runs: the
+    rows' shape, not the course's numbers; one seed says nothing is measurable); the table gives each way's range over the seeds and, per pair
+    of ways and judge, the per-seed differences, measurable only when their mean exceeds their spread."""
+    from course.bench.style import PAIRS, WAYS, compare_ways, format_table, paired_differences
+    net = RandomFeatures(sizes=(3, 5), channels=8, scales=2)
+    rows = compare_ways(models.teapot(2, dtype=torch.float64), stripes(32, dtype=torch.float64), net, steps=2,
+                        size=24, views=1, seeds=1)
+    assert sorted((r["run"], r["seed"]) for r in rows) == sorted((w, 0) for w, _ in WAYS)
+    assert all(r["outline"] == 0 for r in rows if "texture only" in r["run"])
+    assert all(r["held_out"] > 0 and r["held_out_soft"] > 0 for r in rows)
+    pairs = paired_differences(rows)
+    assert len(pairs) == 2 * len(PAIRS) and all(len(p["diffs"]) == 1 and p["sign"] is None for p in pairs)
+    made = [dict(run=w, seed=s, steps=1, seconds=1.0, train=1.0, held_out=1.0 + 0.1 * k + 0.01 * s,
+                 held_out_soft=2.0 - 0.1 * k * s, outline=0.0, moved=0.0) for k, (w, _) in enumerate(WAYS)
+            for s in range(3)]
+    verdicts = {(p["a"], p["b"], p["judge"]): p["sign"] for p in paired_differences(made)}
+    assert verdicts["NMR", "z-buffer", "z-buffer judge"] == "lower"         # -0.1 at every seed, spread 0
+    assert verdicts["NMR", "z-buffer", "soft judge"] is None                # 0, +0.1, +0.2: mean 0.1, spread 0.2
+    table = format_table(made, seconds=False)
+    assert "3 seed(s): 0, 1, 2" in table and "no measurable difference" in table and "seconds" not in table
 
 
 def test_deep_dream_raises_the_activation():

@@ -1,5 +1,5 @@
 """The checks of lecture 11's graded tasks (style transfer and DeepDream): 11.1 gram_matrix, 11.2 style_loss,
-11.3 random_directions, 11.4 deep_dream_step.
+11.3 random_directions, 11.4 deep_dream_step, 11.5 compare_runs (a design: how to judge two stylised meshes).
 
 Each check runs the student's function next to a reference on fixed, seeded-random and stress inputs and
 says what to fix, recognising the typical mistakes of the task. ``import course.grading`` imports this
@@ -12,7 +12,15 @@ module, which registers its checks in ``course.grading.TASKS``.
   (``course.style.transfer.random_directions``); graded by statistics: unit length, seeded, the heights z uniform
   on [-1, 1] (uniform angles crowd the poles), the azimuths uniform, no direction preferred.
 * 11.4, one DeepDream step: ``x + step · g / mean |g|`` with g the gradient of the objective at x (ascent; the
-  step normalised so its size does not depend on the gradient's scale), returned detached, x unchanged.
+  step normalised so its size does not depend on the gradient's scale), returned detached, x unchanged; where
+  g is 0 everywhere (a flat objective) x comes back unchanged, not NaN.
+* 11.5, judging two results (an analysis: the student designs it): which of two runs looks more stylish from a
+  random direction, from n views drawn uniform on the sphere, with the difference's standard error and a
+  verdict. What the task leaves to the student is the design: rendering both runs from the *same* views (the
+  view-to-view variation, much larger than the difference, then cancels: a run compared with itself gives
+  exactly 0), and the standard error that goes with that design (the spread of the paired differences / √n).
+  Graded on the grader's own "runs" (render functions of the direction whose losses it knows) through the
+  views the student's function actually asked for.
 
 The references are written here, in float64; ``tests/test_grading_11.py`` checks that they agree with the
 package. A graded function that calls them, or the package functions doing the task's work, scores 0.
@@ -27,14 +35,16 @@ from .helpers import _call, _match, compare, generator, grade_parts, require, to
 from .registry import forbidden_call, task
 
 __all__ = ["gram_matrix_reference", "style_loss_reference", "random_directions_reference",
-           "deep_dream_step_reference"]
+           "deep_dream_step_reference", "compare_runs_reference"]
 
 FORBIDDEN = [("course.style", "gram_matrix"), ("course.style", "style_loss"), ("course.style", "RandomFeatures"),
              ("course.style.transfer", "random_directions"), ("course.style.transfer", "deep_dream_mesh"),
              ("course.grading.lecture11", "gram_matrix_reference"),
              ("course.grading.lecture11", "style_loss_reference"),
              ("course.grading.lecture11", "random_directions_reference"),
-             ("course.grading.lecture11", "deep_dream_step_reference")]
+             ("course.grading.lecture11", "deep_dream_step_reference"),
+             ("course.grading.lecture11", "compare_runs_reference"),
+             ("course.style.transfer", "held_out_style_loss")]
 
 
 # ------------------------------------------------------------------------------------- the references
@@ -55,8 +65,14 @@ def random_directions_reference(n, gen) -> torch.Tensor:
 
 
 def deep_dream_step_reference(x, objective, step_size) -> torch.Tensor:
-    """11.4: ``x + step_size · g / mean |g|``, g = ∇ objective(x), detached."""
+    """11.4: ``x + step_size · g / mean |g|``, g = ∇ objective(x), detached; x itself where g = 0."""
     return _dream(x, objective, step_size)
+
+
+def compare_runs_reference(render_a, render_b, loss, n, gen):
+    """11.5: (mean of the paired differences loss(render_a(d)) - loss(render_b(d)) over n directions uniform on
+    the sphere drawn from gen, its standard error std / √n (n - 1 in the variance), "a", "b" or "none")."""
+    return _compare(render_a, render_b, loss, n, gen)
 
 
 def _gram(features, scale="hw"):
@@ -94,13 +110,15 @@ def _directions(n, gen, kind="uniform"):
     return torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], 1)
 
 
-def _dream(x, objective, step_size, sign=1.0, norm="mean"):
+def _dream(x, objective, step_size, sign=1.0, norm="mean", guard=True):
     y = x.detach().clone().requires_grad_(True)
     (g,) = torch.autograd.grad(objective(y), y)
     if norm == "mean":
-        scale = g.abs().mean().clamp_min(1e-12)
+        scale = g.abs().mean()
+        scale = torch.where(scale > 0, scale, torch.ones_like(scale)) if guard else scale   # g = 0: x unchanged
     elif norm == "l2":
-        scale = g.norm().clamp_min(1e-12)
+        scale = g.norm()
+        scale = torch.where(scale > 0, scale, torch.ones_like(scale))
     else:
         scale = torch.ones((), dtype=g.dtype)
     return (x.detach() + sign * step_size * g / scale).detach()
@@ -333,6 +351,12 @@ def _dream_problem(impl, label, x, objective, step):
         return (f"{name}: the result still requires grad: return it detached (x + ... computed under no_grad, or "
                 ".detach())")
     expected = _dream(x, objective, step)
+    if not bool(torch.isfinite(out).all()) and bool(torch.isfinite(expected).all()):
+        y = x.detach().clone().requires_grad_(True)
+        (g,) = torch.autograd.grad(objective(y), y)
+        if not bool(g.any()):
+            return (f"{name}: NaN in the result: g is 0 everywhere here (a flat objective), so mean |g| = 0 and "
+                    "g / mean |g| is 0 / 0: where mean |g| is 0 there is no direction to climb, return x unchanged")
     message = compare(out, expected, name=name, check_dtype=True, atol=1e-12, rtol=1e-10)
     if message is None or "dtype" in message or "shape" in message:
         return message
@@ -349,7 +373,7 @@ def _dream_problem(impl, label, x, objective, step):
     return f"{name}: {explanation}" if explanation else message
 
 
-@task("11.4", "deep_dream_step", points=2, reference=("course.grading.lecture11", "deep_dream_step_reference"))
+@task("11.4", "deep_dream_step", points=3, reference=("course.grading.lecture11", "deep_dream_step_reference"))
 def _check_deep_dream_step(impl):
     forbidden = forbidden_call(impl, "deep_dream_step", FORBIDDEN)
     if forbidden:
@@ -365,4 +389,184 @@ def _check_deep_dream_step(impl):
         require(_dream_problem(impl, label, x, objective, step))
         big = lambda y: 1e6 * objective(y)                                  # noqa: E731
         require(_dream_problem(impl, label + ", scaled by 1e6", x, big, step))
-    return grade_parts((1, "simple objectives", simple), (1, "an image's filter response, any scale", image))
+
+    def flat():
+        x = torch.full((6, 6, 3), 0.5, dtype=torch.float64)                # grey: no zero-mean filter responds
+        require(_dream_problem(impl, "a flat objective (g = 0 everywhere)", x, lambda y: 0.0 * y.sum() + 2.0, 0.05))
+        _, x2, objective, step = problems[2]
+        dead = lambda y: objective(y) * 0.0                                 # noqa: E731
+        require(_dream_problem(impl, "a filter response times 0", x2, dead, step))
+    return grade_parts((1, "simple objectives", simple), (1, "an image's filter response, any scale", image),
+                       (1, "g = 0: x unchanged", flat))
+
+
+# ------------------------------------------------------------------- 11.5 compare_runs (a design)
+
+def _compare(render_a, render_b, loss, n, gen, paired=True, se="paired", ddof=1, sign=1.0, threshold=2.0,
+             kind="uniform"):
+    """The reference of 11.5 and, through its switches, the typical mistakes' answers."""
+    d = _directions(n, gen, kind)
+    la = torch.stack([torch.as_tensor(loss(render_a(x)), dtype=torch.float64).reshape(()) for x in d])
+    d_b = d if paired else _directions(n, gen, kind)
+    lb = torch.stack([torch.as_tensor(loss(render_b(x)), dtype=torch.float64).reshape(()) for x in d_b])
+    diffs = la - lb
+    mean = diffs.mean()
+    if se == "paired":
+        error = diffs.std(correction=ddof) / math.sqrt(n)
+    elif se == "unpaired":
+        error = (la.var(correction=ddof) / n + lb.var(correction=ddof) / n).sqrt()
+    else:                                                                   # the spread, not its mean's
+        error = diffs.std(correction=ddof)
+    verdict = "none"
+    if sign * float(mean) < -threshold * float(error):
+        verdict = "a"
+    elif sign * float(mean) > threshold * float(error):
+        verdict = "b"
+    return mean.detach(), error.detach(), verdict
+
+
+class _Run:
+    """A grader's stand-in for a stylised mesh seen from direction d: ``render(d)`` returns a small "image"
+    (4, 4, 3) whose mean is the loss this run has from d, and records every direction asked for."""
+
+    def __init__(self, value):
+        self.value, self.calls = value, []
+
+    def __call__(self, d):
+        d = torch.as_tensor(d, dtype=torch.float64).detach().reshape(-1)
+        if d.numel() != 3:
+            raise Fail(f"compare_runs: render takes one direction (3,), it was given shape {tuple(d.shape)}")
+        self.calls.append(d.clone())
+        return torch.full((4, 4, 3), float(self.value(d)), dtype=torch.float64)
+
+
+def _image_loss(image):
+    return torch.as_tensor(image, dtype=torch.float64).mean()
+
+
+def _common(d):                                             # what every view of both runs shares: large
+    return 5.0 + 1.5 * d[2] + math.sin(3.0 * float(d[0])) + 0.8 * float(d[1]) ** 2
+
+
+def _runs(gap=0.04):
+    """Two runs whose losses share a large view-to-view variation and differ by a small, smooth amount: run a
+    lower by ``gap`` on average (measurable only when both are rendered from the same views)."""
+    return (_Run(lambda d: _common(d) - gap + 0.05 * float(d[1])), _Run(lambda d: _common(d)))
+
+
+def _compare_call(impl, render_a, render_b, n, seed, label):
+    name = f"compare_runs({label}, n = {n})"
+    out = impl(render_a, render_b, _image_loss, n, generator(seed))
+    if not isinstance(out, (tuple, list)) or len(out) != 3:
+        raise Fail(f"{name}: return a tuple (difference, standard_error, verdict), got "
+                   f"{type(out).__name__ if not isinstance(out, (tuple, list)) else f'{len(out)} values'}")
+    diff, error, verdict = out
+    values = []
+    for value, what in ((diff, "difference"), (error, "standard_error")):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = torch.tensor(float(value), dtype=torch.float64)        # a plain number is fine too
+        t = to_tensor(value, f"{name} {what}").to(torch.float64)
+        if t.numel() != 1:
+            raise Fail(f"{name}: {what} must be one number, got shape {tuple(t.shape)}")
+        values.append(float(t.reshape(())))
+    if verdict not in ("a", "b", "none"):
+        raise Fail(f"{name}: the verdict must be \"a\", \"b\" or \"none\", got {verdict!r}")
+    for run, who in ((render_a, "render_a"), (render_b, "render_b")):
+        if len(run.calls) != n:
+            raise Fail(f"{name}: {who} was called {len(run.calls)} times: render each run once from each of the n "
+                       "views")
+        length = torch.stack(run.calls).norm(dim=1)
+        if float((length - 1).abs().max()) > 1e-9:
+            raise Fail(f"{name}: the directions must be unit vectors, got lengths from {float(length.min()):.4g} "
+                       f"to {float(length.max()):.4g}")
+    return name, values[0], values[1], verdict
+
+
+def _losses(run):
+    return torch.tensor([float(run.value(d)) for d in run.calls], dtype=torch.float64)
+
+
+@task("11.5", "compare_runs", points=5, reference=("course.grading.lecture11", "compare_runs_reference"))
+def _check_compare_runs(impl):
+    forbidden = forbidden_call(impl, "compare_runs", FORBIDDEN)
+    if forbidden:
+        return 0, forbidden
+
+    def views():
+        a, b = _runs()
+        _compare_call(impl, a, b, 40, 501, "two runs")
+        a2, b2 = _runs()
+        _compare_call(impl, a2, b2, 40, 501, "two runs")
+        if not torch.equal(torch.stack(a.calls), torch.stack(a2.calls)):
+            require("compare_runs: two calls with generators seeded alike asked for different views: draw every "
+                    "random number from the generator argument")
+        a3, b3 = _runs()
+        _compare_call(impl, a3, b3, 40, 502, "two runs")
+        if torch.equal(torch.stack(a.calls), torch.stack(a3.calls)):
+            require("compare_runs: generators seeded differently gave the same views: use the generator argument")
+        a4, b4 = _runs()
+        _compare_call(impl, a4, b4, 2000, 503, "two runs")
+        require(_uniformity(torch.stack(a4.calls), "compare_runs(n = 2000): the views of run a"))
+
+    def itself():
+        run = _Run(lambda d: _common(d))
+        same = _Run(lambda d: _common(d))
+        name, diff, error, verdict = _compare_call(impl, run, same, 50, 511, "a run against an identical copy")
+        if diff != 0.0 or error != 0.0 or verdict != "none":
+            different = not torch.equal(torch.stack(run.calls), torch.stack(same.calls))
+            why = (" The two runs were rendered from different views, so the difference carries the views' own "
+                   "variation (here it is all there is). Render both runs from the same n views: that "
+                   "variation then cancels in each view's difference.") if different else ""
+            require(f"{name}: a run compared with an identical copy must give difference 0, standard error 0 and "
+                    f"\"none\", got {diff:.4g}, {error:.4g}, {verdict!r}.{why}")
+
+    def difference():
+        a, b = _runs()
+        name, diff, _, _ = _compare_call(impl, a, b, 60, 521, "two runs")
+        if not torch.equal(torch.stack(a.calls), torch.stack(b.calls)):
+            require(f"{name}: run a and run b were rendered from different views: the difference of two means "
+                    "over different views carries the views' variation, about 5 times the gap it is after here; "
+                    "render both from the same views and average the differences")
+        la, lb = _losses(a), _losses(b)
+        want = float(la.mean() - lb.mean())
+        if abs(diff - want) > 1e-9 * max(1.0, abs(want)):
+            if abs(diff + want) <= 1e-9 * max(1.0, abs(want)):
+                require(f"{name}: the difference is b - a: return loss(a) - loss(b) (negative when a is more "
+                        "stylish)")
+            require(f"{name}: the difference must be the mean over your views of loss(render_a(d)) - "
+                    f"loss(render_b(d)): {want:.6g} from the views you asked for, got {diff:.6g}")
+
+    def standard_error():
+        a, b = _runs()
+        name, diff, error, _ = _compare_call(impl, a, b, 60, 531, "two runs")
+        la, lb = _losses(a), _losses(b)
+        paired = [float((la - lb).std(correction=c)) / math.sqrt(60) for c in (1, 0)]
+        if any(abs(error - p) <= 1e-9 * max(1.0, p) for p in paired):
+            return
+        unpaired = [float((la.var(correction=c) / 60 + lb.var(correction=c) / 60).sqrt()) for c in (1, 0)]
+        spread = [float((la - lb).std(correction=c)) for c in (1, 0)]
+        if any(abs(error - u) <= 1e-9 * max(1.0, u) for u in unpaired):
+            require(f"{name}: {error:.4g} is the standard error of two independent means, √(var a / n + var b / n): "
+                    "the views are shared, so the errors are not independent; the standard error of the mean of "
+                    f"the n paired differences is their standard deviation / √n, here {paired[0]:.4g}")
+        if any(abs(error - s) <= 1e-9 * max(1.0, s) for s in spread):
+            require(f"{name}: {error:.4g} is the spread of the differences, not the standard error of their mean: "
+                    "divide by √n")
+        require(f"{name}: the standard error of the mean of the n paired differences is their standard deviation "
+                f"/ √n: {paired[0]:.4g} from the views you asked for, got {error:.4g}")
+
+    def verdict():
+        for gap, n, seed in ((0.04, 60, 541), (-0.04, 60, 542), (0.004, 30, 543), (0.0, 30, 544)):
+            a, b = _runs(gap)
+            name, diff, error, said = _compare_call(impl, a, b, n, seed, f"run a lower by {gap:g} on average")
+            want = "a" if diff < -2 * error else "b" if diff > 2 * error else "none"
+            if said != want:
+                flipped = "b" if want == "a" else "a" if want == "b" else None
+                hint = (" (the verdict names the run with the LOWER loss: the more stylish)" if said == flipped
+                        else "")
+                require(f"{name}: difference {diff:.4g} and standard error {error:.4g} call for {want!r} (a measurable "
+                        f"difference is more than 2 standard errors), got {said!r}{hint}")
+
+    return grade_parts((1, "n unit views from the generator, uniform on the sphere", views),
+                       (1, "a run against itself", itself), (1, "the difference", difference),
+                       (1, "its standard error", standard_error), (1, "the verdict", verdict))

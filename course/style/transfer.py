@@ -12,11 +12,13 @@ with the colour block of the Gram matrices weighted up (``colour_weight``). Deep
 drops the style image: it *maximises* how strongly chosen random filters respond to the rendered images, so
 patterns those filters like grow on the surface.
 
-The renderer must carry gradients to the vertices as well as the texture (``render_texture``).
-``renderer="soft"``: soft rasterization (``course.soft``) of the uvs, then the texture looked up at them: the
-silhouette and every edge move under the loss. ``renderer="hard"``: the z-buffer's uvs: the texture still gets
-its gradient, and the vertices get one through the uvs inside each face, but no silhouette or occlusion
-boundary can move. Running both from one seed is lecture 11's comparison.
+The renderer carries gradients to the texture and the vertices (``render_texture``). ``renderer="nmr"``: Kato et
+al.'s own renderer, the Neural 3D Mesh Renderer (``course.nmr``, lecture 08): the z-buffer's image, with their
+approximate gradient for moving the edges and the silhouette. ``renderer="soft"``: soft rasterization
+(``course.soft``; Liu et al. 2019) of the uvs, then the texture looked up at them: the silhouette and every edge
+move smoothly under the loss. ``renderer="hard"``: the z-buffer's uvs alone: the texture still gets its gradient,
+and the vertices get one through the uvs inside each face, but no silhouette or occlusion boundary is moved on
+purpose. Running them from the same seeds is lecture 11's comparison (``course.bench.style``).
 
 Views: ``random_directions`` draws directions uniform on the sphere (uniform in z = cos θ and in the azimuth,
 not in the two angles: that would crowd the poles), one camera per direction looking at the mesh's centre.
@@ -32,6 +34,7 @@ import torch
 
 from ..camera import Camera
 from ..mesh import Mesh
+from ..nmr import nmr_image
 from ..raster import interpolate, rasterize
 from ..soft import soft_rasterize
 from .features import RandomFeatures, _check_image, style_loss
@@ -41,7 +44,7 @@ from ..textures import sample_texture
 __all__ = ["random_directions", "view_camera", "render_texture", "stylize_mesh", "deep_dream_mesh", "StyleRun",
            "held_out_style_loss", "outline_change", "RENDERERS"]
 
-RENDERERS = ("soft", "hard")
+RENDERERS = ("soft", "nmr", "hard")
 
 
 def random_directions(n: int, generator: torch.Generator, *, dtype=torch.float64) -> torch.Tensor:
@@ -75,7 +78,10 @@ def render_texture(verts, faces, uvs, texture, camera, *, renderer="soft", backg
     bilinear) at uv / α and composited over the background with α: differentiable in the vertices (through α
     and uv) and the texture. ``"hard"``: the z-buffer's uvs (``rasterize`` + ``interpolate``) and its mask:
     differentiable in the texture, and in the vertices only through the uvs inside each face (the texture slides
-    under the pixels; no silhouette or occlusion edge is moved on purpose)."""
+    under the pixels; no silhouette or occlusion edge is moved on purpose). ``"nmr"``: the same image, and to
+    the vertices also the Neural 3D Mesh Renderer's approximate edge gradient (``nmr.nmr_image``, Kato et al.
+    2018; a newly covered pixel takes the colour of the face's nearest pixel along the row or column, as the
+    paper's code does): with ``"hard"``'s forward pass, the renderer Kato et al.'s style transfer used."""
     mesh = Mesh(verts, faces)
     bg = torch.as_tensor(background, dtype=verts.dtype)
     if renderer == "soft":
@@ -84,13 +90,16 @@ def render_texture(verts, faces, uvs, texture, camera, *, renderer="soft", backg
                              gamma=gamma)
         alpha = out[..., 2:]
         uv = out[..., :2] / alpha.clamp_min(1e-6)
-    elif renderer == "hard":
+    elif renderer in ("hard", "nmr"):
         frags = rasterize(mesh, camera)
         alpha = frags.mask[..., None].to(verts.dtype)
         uv = interpolate(uvs.to(verts.dtype), frags, faces)
     else:
         raise ValueError(f"renderer must be one of {', '.join(RENDERERS)}, got {renderer!r}")
-    return sample_texture(texture, uv, "bilinear") * alpha + bg * (1 - alpha)
+    image = sample_texture(texture, uv, "bilinear") * alpha + bg * (1 - alpha)
+    if renderer == "nmr":                                                   # Kato et al.'s edge gradient
+        image = nmr_image(image, mesh, camera, frags.face_id, background=bg.detach(), cull_backfaces=False)
+    return image
 
 
 @dataclass
@@ -137,8 +146,8 @@ def stylize_mesh(mesh, style, *, steps: int = 60, views: int = 2, size: int = 64
                  network: RandomFeatures | None = None, snapshot_every: int | None = None,
                  progress: bool = False, dtype=torch.float64) -> StyleRun:
     """Kato et al.'s 2D-to-3D style transfer: vertex offsets and a texture (``texture_size``², from mid-grey,
-    on the mesh's uvs) by Adam, so that ``views`` random views per step match ``style`` (H, W, 3)'s
-    random-filter Gram matrices.
+    on the mesh's uvs) by Adam, so that ``views`` random views per step, rendered by ``renderer`` ("soft",
+    "nmr": the paper's, or "hard"), match ``style`` (H, W, 3)'s random-filter Gram matrices.
 
     colour_weight: how much more the colour block (mean colour and covariance) counts than each filter block
     (random filters reward contrast, and alone drive the colours to saturation); content_weight: on the mean
