@@ -25,10 +25,11 @@ toward +x, as ``shape_data.view_cameras``), looking at the origin, +y up; the el
 (``soft.soft_rasterize``, σ = 3e-3, about a pixel of blur at 32 px): the gradient w.r.t. a camera comes
 from how the outline moves as the camera turns, which needs the blur to reach pixels near the edges.
 
-What to expect (``python -m course bench learn --parts mvtn``): on the course's families learned views help
-little, a few points of accuracy at most, about the spread between seeds. The shapes stand upright (as
-ShapeNet's do) and their families differ in outlines that a circle of views 30° up already shows, so the
-views' gradient is small and the CNN adapts long before the cameras move far (they turn by tens of degrees).
+What to expect (``python -m course bench learn --parts mvtn``): on the course's families learned views shared
+by every object make no measurable difference (the gap is within the spread between seeds), although the
+cameras do turn, by tens of degrees: the accuracy does not follow. The shapes stand upright (as ShapeNet's
+do) and their families differ in outlines that a circle of views 30° up already shows. This is "learned",
+not MVTN's per-object "predicted" views.
 MVTN's gains were largest for rotated or partial objects, where a fixed circle can miss what matters.
 Careful with "predicted": its view network reads the 3D points, so it could pass the class to the
 classifier through the pose itself (turn one way for cones, another for vases); higher accuracy there does
