@@ -70,6 +70,8 @@ def test_surface_distance_is_exact_in_every_region_of_a_triangle():
         brute = torch.cdist(x, dense).min(1).values
         got = surface_distance(x, Mesh(v, torch.tensor([[0, 1, 2]])))
         assert bool((got <= brute + 1e-14).all()) and float((brute - got).max()) < 5e-4
+        hinted = surface_distance(x, Mesh(v, torch.tensor([[0, 1, 2]])), on_surface=dense[::7])
+        torch.testing.assert_close(hinted, got, atol=1e-13, rtol=0)           # a point on it: rounding apart
 
 
 def test_the_grid_search_finds_exactly_the_brute_forces_nearest_samples():

@@ -205,15 +205,16 @@ def f_score(pred, target, *, threshold: float = 0.02, samples: int = 20000, seed
     threshold = _check_real(threshold, "threshold", low=0, low_open=True)
     p, _ = sample_surface(pred, samples, torch.Generator().manual_seed(int(seed)))
     t, _ = sample_surface(target, samples, torch.Generator().manual_seed(int(seed)))
-    precision = float((surface_distance(p, target) <= threshold).double().mean())
-    recall = float((surface_distance(t, pred) <= threshold).double().mean())
+    precision = float((surface_distance(p, target, on_surface=t) <= threshold).double().mean())
+    recall = float((surface_distance(t, pred, on_surface=p) <= threshold).double().mean())
     return 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
 
 
-def surface_distance(points, mesh) -> torch.Tensor:
+def surface_distance(points, mesh, on_surface=None) -> torch.Tensor:
     """(N,) float64 the distance from each of ``points`` (N, 3) to the nearest point of ``mesh``'s triangles.
 
-    Exact: each point's distance to its nearest vertex bounds the answer from above, so only triangles whose
+    Exact: each point's distance to its nearest vertex (or to the nearest of ``on_surface``, (M, 3) points known
+    to lie on the mesh, such as its samples: a tighter bound on a coarse mesh) bounds the answer from above, so only triangles whose
     bounding sphere reaches within that bound can hold a nearer point; for those pairs the triangle's closest
     point is found (Ericson, Real-Time Collision Detection, 5.1.5: the vertex, edge or face region the point projects
     into), and the least distance kept. The triangles are culled by spheres around them (centroid and farthest
@@ -226,6 +227,8 @@ def surface_distance(points, mesh) -> torch.Tensor:
     centre = tri.mean(1)                                                # (F, 3) a sphere around each triangle
     radius = (tri - centre[:, None]).norm(dim=-1).max(1).values         # (F,)
     corners = verts[faces.unique()]                                     # the vertices of some triangle
+    if on_surface is not None:
+        corners = torch.cat([corners, torch.as_tensor(on_surface, dtype=torch.float64).reshape(-1, 3)])
     slack = 1e-9 * (1 + float(x.abs().max()) + float(corners.abs().max()))   # cdist's rounding, generously
     out = torch.empty(x.shape[0], dtype=torch.float64)
     rows = max(1, PAIRS // max(faces.shape[0], corners.shape[0]))
