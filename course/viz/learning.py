@@ -14,7 +14,8 @@ silhouettes from a camera at (azimuth, elevation), 3.2 units away with a 40° fi
 The line it prints (``"line"``, also written under the figure, so it follows the controls): the view, its silhouette IoU and the network's pixels over the target's, and
 the network mesh's volume over the target's (voxels at 32³, ``learning.data.voxelize``). Every number is
 float64. The shapes, the network's meshes, their volumes and each IoU curve are computed once and kept; a
-redraw rasterizes two meshes of a few hundred faces at 64² (``python -m course bench explorers --only 13``).
+redraw rasterizes two meshes of a few hundred faces at 64²; it redraws when a control is released, its controls
+greyed out meanwhile (``python -m course bench explorers --only 13`` times it).
 """
 from __future__ import annotations
 
@@ -145,4 +146,4 @@ def reconstruction_view_explorer() -> None:
 _explorers.EXPLORERS["13 reconstruction views"] = (
     reconstruction_view_explorer, draw_reconstruction_view,
     dict(family=list(VIEW_FAMILIES), azimuth=(-180.0, 180.0, 15.0, 0.0), elevation=(-60.0, 90.0, 15.0, 90.0)),
-    True)
+    False)                      # redrawn on release: a new family or elevation computes its shapes and IoU curve
