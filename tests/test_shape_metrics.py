@@ -9,7 +9,7 @@ from course.inverse import fit_silhouettes, sphere_views
 from course.inverse.large_steps import Parameterization, UniformAdam, laplacian
 from course.mesh import Mesh
 from course.inverse.metrics import (chamfer_distance, f_score, normal_consistency, sample_surface, shape_metrics,
-                                   surface_distance)
+                                   surface_distance, surface_scores)
 
 
 def _expected_offset_chamfer(d):
@@ -42,6 +42,9 @@ def test_f_score_of_concentric_spheres_and_half_a_sphere():
     assert f_score(unit, unit, samples=1000) == 1.0
     assert f_score(unit, wider, threshold=0.04, samples=1000) == 1.0
     assert f_score(unit, wider, threshold=0.02, samples=1000) == 0.0
+    both = surface_scores(unit, wider, threshold=0.04, samples=1000)             # point to surface: the gap
+    diagonal = float((wider.verts.max(0).values - wider.verts.min(0).values).norm())
+    assert both["fscore"] == 1.0 and abs(both["chamfer"] * diagonal - 0.03) < 0.003
     keep = unit.verts[unit.faces].mean(1)[:, 1] > 0
     cap = Mesh(unit.verts, unit.faces[keep])
     assert abs(f_score(cap, unit, threshold=0.02, samples=3000) - 2 / 3) < 0.03

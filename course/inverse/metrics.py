@@ -32,7 +32,8 @@ import torch
 
 from ..tensors import _check_count, _check_real
 
-__all__ = ["sample_surface", "chamfer_distance", "normal_consistency", "f_score", "surface_distance", "shape_metrics"]
+__all__ = ["sample_surface", "chamfer_distance", "normal_consistency", "f_score", "surface_distance", "surface_scores",
+           "shape_metrics"]
 
 BLOCK = 1024             # rows of the distance matrix at a time (BLOCK × n float64 values)
 PAIRS = 1 << 21          # candidate pairs of the grid search at a time (about 100 MB of working memory)
@@ -202,12 +203,26 @@ def f_score(pred, target, *, threshold: float = 0.02, samples: int = 20000, seed
     points on the target within it of the prediction's; 0 when both are 0. Distances are to the surface itself
     (``surface_distance``), not to the other side's samples, so a threshold finer than the samples' spacing
     still measures the surfaces."""
+    return surface_scores(pred, target, threshold=threshold, samples=samples, seed=seed)["fscore"]
+
+
+def surface_scores(pred, target, *, threshold: float = 0.02, samples: int = 20000, seed: int = 0) -> dict:
+    """``{"fscore", "chamfer"}`` from one set of samples and their exact distances to the other surface: the
+    F-score at ``threshold`` (``f_score``) and a point-to-surface Chamfer distance, the mean distance of each
+    side's samples to the other *surface*, the two means averaged and divided by the target's bounding-box
+    diagonal (``chamfer_distance`` measures to the other side's samples instead, which adds about their
+    spacing)."""
     threshold = _check_real(threshold, "threshold", low=0, low_open=True)
     p, _ = sample_surface(pred, samples, torch.Generator().manual_seed(int(seed)))
     t, _ = sample_surface(target, samples, torch.Generator().manual_seed(int(seed)))
-    precision = float((surface_distance(p, target, on_surface=t) <= threshold).double().mean())
-    recall = float((surface_distance(t, pred, on_surface=p) <= threshold).double().mean())
-    return 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
+    to_target = surface_distance(p, target, on_surface=t)
+    to_pred = surface_distance(t, pred, on_surface=p)
+    precision = float((to_target <= threshold).double().mean())
+    recall = float((to_pred <= threshold).double().mean())
+    verts, _ = _mesh_arrays(target, "target")
+    diagonal = float((verts.max(0).values - verts.min(0).values).norm())
+    return {"fscore": 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall),
+            "chamfer": float((to_target.mean() + to_pred.mean()) / 2) / diagonal}
 
 
 def surface_distance(points, mesh, on_surface=None) -> torch.Tensor:
