@@ -34,3 +34,21 @@ def test_a_quick_run_prints_both_tables_and_saves(tmp_path, capsys):
     model = load_reconstructor(path)
     assert "n_train=4" in model.note and path.stat().st_size < 600_000 and (tmp_path / "views.png").is_file()
     assert model(torch.zeros(1, 32, 32, 3)).shape == (1, 162, 3)
+
+
+def test_a_quick_table_prints_every_row_and_saves_both_networks(tmp_path, capsys):
+    """Table 1's rows on a tiny set: every method scored with IoU, Chamfer and F-score, paired against the mesh
+    network, inputs from any view; both checkpoints load."""
+    from course.learning.voxels import load_voxel_reconstructor
+    rows = bench.run(_args("--quick", "--no-progress", "--parts", "table", "--n-test", "1", "--save",
+                           str(tmp_path / "mesh.pt"), "--save-voxel", str(tmp_path / "voxel.pt")))
+    out = capsys.readouterr().out
+    assert "inputs: any view (all)" in out and "fscore:" in out and "held_out  torus" in out
+    mean = next(r for r in rows if r["split"] == "test" and r["family"] == "mean")
+    for method in ("mesh", "voxel", "retrieval", "clustering", "oracle", "sphere"):
+        assert 0 <= mean[f"iou_{method}"] <= 1 and 0 <= mean[f"fscore_{method}"] <= 1
+        assert mean[f"chamfer_{method}"] >= 0
+    assert mean["iou_oracle"] >= mean["iou_retrieval"] and mean["iou_oracle"] >= mean["iou_clustering"]
+    assert "iou_voxel_se" in mean and "iou_mesh_diff" not in mean
+    assert "inputs all" in load_reconstructor(tmp_path / "mesh.pt").note
+    assert "inputs all" in load_voxel_reconstructor(tmp_path / "voxel.pt").note
