@@ -112,6 +112,7 @@ MISTAKES = [
     ("11.5", lambda *a: lecture11._compare(*a, sign=-1.0), 4, ["LOWER loss"]),
     ("11.5", lambda *a: lecture11._compare(*a, kind="angles"), 4, ["poles are crowded"]),
     ("11.5", lambda *a: lecture11._compare(*a, threshold=1.0), 4, ["more than 2 standard errors"]),
+    ("11.5", lambda ra, rb, loss, n, gen: (0.0, 0.0, "none"), 0, ["called 0 times"]),
 ]
 
 (test_the_reference_scores_full_marks, test_a_students_solution_scores_full_marks,

@@ -31,7 +31,7 @@ import math
 
 import torch
 
-from .helpers import _call, _match, compare, generator, grade_parts, require, to_tensor
+from .helpers import Fail, _call, _match, compare, generator, grade_parts, require, to_tensor
 from .registry import forbidden_call, task
 
 __all__ = ["gram_matrix_reference", "style_loss_reference", "random_directions_reference",
@@ -538,7 +538,7 @@ def _check_compare_runs(impl):
 
     def standard_error():
         a, b = _runs()
-        name, diff, error, _ = _compare_call(impl, a, b, 60, 531, "two runs")
+        name, _, error, _ = _compare_call(impl, a, b, 60, 531, "two runs")
         la, lb = _losses(a), _losses(b)
         paired = [float((la - lb).std(correction=c)) / math.sqrt(60) for c in (1, 0)]
         if any(abs(error - p) <= 1e-9 * max(1.0, p) for p in paired):
