@@ -92,7 +92,11 @@ def test_lectures_05_07_08_colour_scales_and_legends():
     plt.close("all")
     E.draw_area_light()                                                     # no surface: its own colour
     ax = plt.gcf().axes[0]
-    assert ax.get_legend().get_texts()[0].get_text() == "no surface" and len(plt.gcf().axes) == 2
+    names = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert names == ["no surface", "sphere", "torus"] and len(plt.gcf().axes) == 2
+    pixels = ax.images[0].get_array().reshape(-1, 3)                        # the casters painted, not white
+    for colour in ("tab:blue", "tab:orange"):
+        assert (abs(pixels - matplotlib.colors.to_rgb(colour)).max(1) < 1e-6).sum() > 20
     plt.close("all")
     out = E.draw_soft()                                                     # clipped at a percentile
     lim = plt.gcf().axes[1].images[0].get_clim()[1]

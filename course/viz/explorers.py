@@ -362,7 +362,9 @@ def draw_area_light(size: float = 1.0, samples: int = 4) -> dict:
     A point light (size 0) casts hard shadows; the larger the light, the wider the penumbra, where the
     fraction of the light a point sees falls from 1 to 0. Few samples give a noisy penumbra (steps of
     1 / samples²); more samples smooth it at a proportional cost. White is fully lit, black the umbra (no
-    shadow ray reaches the light), pale blue the pixels whose camera ray meets no surface.
+    shadow ray reaches the light), pale blue the pixels whose camera ray meets no surface; the sphere and the
+    torus that cast the shadows are painted in solid colours (lecture 07's ``lit_fraction_grid``), so they do
+    not melt into the lit, white floor.
     """
     from ..raytrace import rectangle_light_samples, visible
     size = _check_range("size", size, 0.0, 3.0)
@@ -385,13 +387,20 @@ def draw_area_light(size: float = 1.0, samples: int = 4) -> dict:
     line = (f"light {size:g} wide, {rays}: mean visibility {_r4(frac.mean())}, penumbra {_r4(penumbra)} of the "
             f"points seen")
     fig, ax = plt.subplots(figsize=(5.6, 5.0))
-    cmap = matplotlib.colormaps["gray"].with_extremes(bad=_NO_SURFACE)
-    show_image(image.view(RT_SIZE, RT_SIZE), ax=ax, cmap=cmap, vmin=0, vmax=1)
-    bar = fig.colorbar(ax.images[0], ax=ax, fraction=0.046, pad=0.03, ticks=[0, 0.5, 1])
+    from .raytrace import CASTER_COLOURS
+    rgb = np.repeat(np.nan_to_num(image.numpy(), nan=0.0)[:, None], 3, axis=1)   # (H W, 3) grey: the fraction
+    rgb[~seen.numpy()] = matplotlib.colors.to_rgb(_NO_SURFACE)
+    part = torch.bucketize(hits.face_id, torch.tensor([32, 352]), right=True).numpy()   # 0 floor, 1 ball, 2 ring
+    for k in (1, 2):
+        rgb[seen.numpy() & (part == k)] = matplotlib.colors.to_rgb(CASTER_COLOURS[k - 1])
+    show_image(rgb.reshape(RT_SIZE, RT_SIZE, 3), ax=ax, srgb=False)
+    bar = fig.colorbar(matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, 1), "gray"), ax=ax,
+                       fraction=0.046, pad=0.03, ticks=[0, 0.5, 1])
     bar.ax.set_yticklabels(["0: umbra", "0.5", "1: fully lit"])
-    bar.set_label("fraction of the light a point sees")
-    ax.legend(handles=[matplotlib.patches.Patch(color=_NO_SURFACE, label="no surface")], loc="upper left",
-              fontsize=8, framealpha=0.9)
+    bar.set_label("fraction of the light a point sees (floor)")
+    handles = [matplotlib.patches.Patch(color=colour, label=name)
+               for colour, name in zip((_NO_SURFACE, *CASTER_COLOURS[:2]), ("no surface", "sphere", "torus"))]
+    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.9)
     ax.set_title(f"light {size:g} wide, {rays.replace(' x ', ' × ')}\npenumbra (0 < fraction < 1): "
                  f"{_sig(penumbra)} of the points seen", fontsize=10)
     fig.text(0.5, 0.01, line.replace(": ", ":\n", 1), ha="center", va="bottom", fontsize=9)   # the printed line
