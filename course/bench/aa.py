@@ -156,9 +156,10 @@ def plot_pareto(rows, path=None, ax=None):
             if pts:
                 a.plot([r["ms"] for r in pts], [max(r["rmse"], 1e-12) for r in pts], marker=marker, color=color,
                        label=family)
+                below = family.startswith("adaptive")                       # often on top of ss's points
                 for r in pts:
                     if r["k"] > 1:
-                        a.annotate(f"{r['k']}²", (r["ms"], r["rmse"]), fontsize=7, xytext=(3, 3),
+                        a.annotate(f"{r['k']}²", (r["ms"], r["rmse"]), fontsize=7, xytext=(3, -9 if below else 3),
                                    textcoords="offset points")
         exact = [r for r in mine if r["family"] == "exact"]
         if exact:
