@@ -154,9 +154,10 @@ def plot_pinhole(depth: float, offset: float, focal: float = 1.0, ax=None, behin
 
     A point at camera-space ``depth`` (along the optical axis, drawn to the right) and ``offset`` from the axis
     (drawn upward) sends a ray through the pinhole at the origin; it crosses the image plane at distance
-    ``focal`` in front of the pinhole at ``x``. With ``behind`` the real, inverted image at ``-focal`` (where a
-    physical sensor sits) is drawn too. ``names`` label the offset's axis pieces (depth, offset, image).
-    Returns the axes.
+    ``focal`` in front of the pinhole at ``x`` (labelled ``x = X/Z`` and the distance ``1`` when ``focal`` is 1,
+    the normalised image plane; ``x = f·X/Z`` and ``f`` otherwise). With ``behind`` the real, inverted image at
+    ``-focal`` (where a physical sensor sits) is drawn too. ``names`` label the offset's axis pieces (depth,
+    offset, image). Returns the axes.
     """
     Z, X, f = float(depth), float(offset), float(focal)
     x = f * X / Z
@@ -181,8 +182,9 @@ def plot_pinhole(depth: float, offset: float, focal: float = 1.0, ax=None, behin
     dz, dx, dim = names
     ax.annotate(dz, (Z / 2, 0), textcoords="offset points", xytext=(0, -12), fontsize=10, ha="center")
     ax.annotate(dx, (Z, X / 2), textcoords="offset points", xytext=(6, 0), fontsize=10, va="center")
-    ax.annotate(f"{dim} = f·{dx}/{dz}", (f, x), textcoords="offset points", xytext=(6, 4), fontsize=10)
-    ax.annotate("f", (f / 2, 0), textcoords="offset points", xytext=(0, -12), fontsize=10, ha="center")
+    scale, fname = ("", "1") if f == 1 else ("f·", "f")                     # focal 1: the normalised image plane
+    ax.annotate(f"{dim} = {scale}{dx}/{dz}", (f, x), textcoords="offset points", xytext=(6, 4), fontsize=10)
+    ax.annotate(fname, (f / 2, 0), textcoords="offset points", xytext=(0, -12), fontsize=10, ha="center")
     ax.set_aspect("equal")
     ax.set_xlabel(f"depth {dz} (optical axis)"), ax.set_ylabel(f"offset {dx}")
     ax.legend(fontsize=7, loc="upper left")
