@@ -12,8 +12,8 @@ import pytest  # noqa: E402
 from course import viz  # noqa: E402
 from course.viz import explorers as E, learning as L  # noqa: E402
 
-DEFAULT_LINE = ("torus, azimuth 0 deg, elevation 90 deg: silhouette IoU 0.598, network pixels / target's 0.99; "
-                "network volume / target's 1.59")
+DEFAULT_LINE = ("torus, azimuth 0 deg, elevation 90 deg: silhouette IoU 0.598, network pixels / target's 0.99, "
+                "target's pixels covered 0.74; network volume / target's 1.59")
 
 
 def test_it_is_exported_and_registered():
@@ -36,6 +36,9 @@ def test_the_view_lies_on_its_curve_and_the_overlay_counts_pixels():
     target, network = L._masks("box", 60.0, 30.0)
     assert out["iou"] == pytest.approx(int((target & network).sum()) / int((target | network).sum()), abs=0)
     assert out["pixels"] == pytest.approx(int(network.sum()) / int(target.sum()), abs=0)
+    assert out["covered"] == pytest.approx(int((target & network).sum()) / int(target.sum()), abs=0)
+    iou, p, c = out["iou"], out["pixels"], out["covered"]
+    assert iou == pytest.approx(c / (1 + p - c), abs=1e-12)           # both / (target + network - both)
     assert L._iou(target, target) == 1.0 and L._iou(target & False, target & False) == 1.0   # empty: a match
 
 

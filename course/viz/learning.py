@@ -11,11 +11,12 @@ silhouettes from a camera at (azimuth, elevation), 3.2 units away with a 40° fi
 * right: the silhouette IoU against the azimuth at this elevation (every 30°), the 8 views that supervised the
   training marked where they sit (30° up), the current view a dot.
 
-The line it prints (``"line"``, also written under the figure, so it follows the controls): the view, its silhouette IoU and the network's pixels over the target's, and
-the network mesh's volume over the target's (voxels at 32³, ``learning.data.voxelize``). Every number is
-float64. The shapes, the network's meshes, their volumes and each IoU curve are computed once and kept; a
-redraw rasterizes two meshes of a few hundred faces at 64²; it redraws when a control is released, its controls
-greyed out meanwhile (``python -m course bench explorers --only 13`` times it).
+The line it prints (``"line"``, also written under the figure, so it follows the controls): the view, its silhouette
+IoU, the network's pixels over the target's (a ratio of areas: 1 can still miss many of the target's pixels), the
+share of the target's pixels the network covers, and the network mesh's volume over the target's (voxels at 32³,
+``learning.data.voxelize``). Every number is float64. The shapes, the network's meshes, their volumes and each
+IoU curve are computed once and kept; a redraw rasterizes two meshes of a few hundred faces at 64²; it redraws
+when a control is released, its controls greyed out meanwhile (``python -m course bench explorers --only 13`` times it).
 """
 from __future__ import annotations
 
@@ -98,8 +99,8 @@ def draw_reconstruction_view(family: str = "torus", azimuth: float = 0.0, elevat
     It opens on the held-out torus seen from straight above, a view no training silhouette came from: the
     network's mesh fills the hole (red). Turn the view: at azimuth 0°, 30° up (the input view) the outlines
     agree about as well as anywhere; elsewhere the network had only the training's silhouettes of other
-    shapes to go by. Returns the view's IoU, the pixel and volume
-    ratios and the line.
+    shapes to go by. Returns the view's IoU, the pixel ratio (network's pixels over the target's), the share of
+    the target's pixels the network covers, the volume ratio and the line.
     """
     family = _explorers._check_choice("family", family, VIEW_FAMILIES)
     azimuth = float(_explorers._check_range("azimuth", azimuth, -180.0, 180.0))
@@ -107,6 +108,7 @@ def draw_reconstruction_view(family: str = "torus", azimuth: float = 0.0, elevat
     target, network = _masks(family, azimuth, elevation)
     iou = _iou(target, network)
     pixels = int(network.sum()) / max(int(target.sum()), 1)
+    covered = int((network & target).sum()) / max(int(target.sum()), 1)
     _, _, target_volume, network_volume = _shape(family)
     volume = network_volume / max(target_volume, 1)
     azimuths, curve = _curve(family, elevation)
@@ -132,10 +134,11 @@ def draw_reconstruction_view(family: str = "torus", azimuth: float = 0.0, elevat
     ax.set_title(f"network mesh volume / target's {volume:.2f}", fontsize=10)
     ax.legend(fontsize=7, loc="lower left")
     line = (f"{family}, azimuth {azimuth:g} deg, elevation {elevation:g} deg: silhouette IoU {iou:.3f}, network "
-            f"pixels / target's {pixels:.2f}; network volume / target's {volume:.2f}")
+            f"pixels / target's {pixels:.2f}, target's pixels covered {covered:.2f}; network volume / target's "
+            f"{volume:.2f}")
     fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)        # the printed line, for these values
-    return dict(iou=iou, pixels=pixels, volume=volume, line=line)
+    return dict(iou=iou, pixels=pixels, covered=covered, volume=volume, line=line)
 
 
 def reconstruction_view_explorer() -> None:
