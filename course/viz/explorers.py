@@ -853,7 +853,9 @@ def draw_style_weight(weight: float = 0.1) -> dict:
     At weight 0 nothing changes; from 0.01 stripes show through the squares, at 0.1 both are there, and from 1
     the stripes cover the checker (its squares still tint them); the content error rises as the style loss
     falls. Adam's steps are about lr long whatever the loss's scale, so once the style term dominates a larger
-    weight changes little: 1 and 10 are close. Images are sRGB-encoded for the screen, as every figure.
+    weight changes the result less: from 1 to 10 the style loss falls 1.7-fold and the content error rises
+    1.24-fold, against 10-fold and 17-fold from 0.01 to 0.1. Images are sRGB-encoded for the screen, as every
+    figure.
     """
     weight = _check_choice("weight", weight, STYLE_WEIGHTS)
     content, style, image, content_err, style_err = _style_run(weight)
@@ -868,8 +870,13 @@ def draw_style_weight(weight: float = 0.1) -> dict:
 
 
 def style_weight_explorer() -> None:
-    """Lecture 11: the style weight against the content (precomputed per weight on first use)."""
+    """Lecture 11: the style weight against the content (precomputed per weight on first use); below it, every
+    weight's content error and style loss."""
     _show(draw_style_weight)
+    print("every weight (100 Adam steps each):")
+    for weight in STYLE_WEIGHTS:
+        *_, content_err, style_err = _style_run(weight)
+        print(f"  style weight {weight:<4g}: content error {_sig(content_err)}, style loss {_sig(style_err)}")
 
 
 # ------------------------------------------------------------------------------------------------ lecture 12
