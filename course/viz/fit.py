@@ -56,6 +56,11 @@ def _is_vertices(a: np.ndarray) -> bool:
 
 # ------------------------------------------------------------------------------------------- curves
 
+METRIC_TITLES = {"iou_loss": "silhouette loss (mean over views)", "held_out_psnr": "held-out PSNR (dB)",
+                 "held_out_iou": "held-out IoU", "rotation_deg": "rotation error (degrees)",
+                 "center_pct": "centre error (% of the distance)"}   # a metric's panel title: readable words
+
+
 def plot_history(history, *, metrics=None, ax=None, log: bool = True, title: str | None = None):
     """The loss curve of a fit, and its metrics. Returns the figure.
 
@@ -93,7 +98,7 @@ def plot_history(history, *, metrics=None, ax=None, log: bool = True, title: str
     loss_ax.plot(np.arange(loss.size), loss, color="C0", lw=1.5, label="loss")
     loss_ax.set_yscale("log" if log and np.all(loss > 0) else "linear")
     loss_ax.set_xlabel("step")
-    loss_ax.set_ylabel("loss")
+    loss_ax.set_ylabel("loss (log scale)" if loss_ax.get_yscale() == "log" else "loss")
     loss_ax.grid(True, alpha=0.3)
     if title or (ax is None and metrics):
         loss_ax.set_title(title or "loss")
@@ -104,7 +109,7 @@ def plot_history(history, *, metrics=None, ax=None, log: bool = True, title: str
         max_.plot(steps, values, "o-" if at_snapshots else "-", color=f"C{k + 1}", lw=1.5, ms=3, label=m)
         max_.set_xlabel("step")
         if ax is None:
-            max_.set_title(m)
+            max_.set_title(METRIC_TITLES.get(m, m.replace("_", " ")))         # a linear axis
             max_.grid(True, alpha=0.3)
     if ax is not None and metrics:
         metric_axes[0].set_ylabel(", ".join(metrics))
