@@ -131,13 +131,12 @@ def _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot
 
 def _predictions(mesh_net, voxel_net, train, test, protocol, seed, lookups):
     """Every row's predictions for the ShapeSet ``test`` with inputs chosen by ``protocol``."""
-    from ..learning.table import input_views, retrieve_shape
+    from ..learning.table import input_views, oracle_shapes, retrieve_shape
     from ..learning.voxels import voxel_mesh
     from ..mesh import Mesh
     views = input_views(test, protocol, seed=seed + 1)
     images = test.images[torch.arange(len(test)), views]
     train_grids, labels, representatives, test_grids = lookups
-    from ..learning.table import oracle_shapes
     nearest = retrieve_shape(train, images, protocol)
     with torch.no_grad():
         verts = mesh_net(images.to(mesh_net.template.dtype))
