@@ -22,8 +22,8 @@ a shadow map whose every stage is smooth, so that the shadow term has a gradient
    (hard rasterization: this route differentiates the shadow term only, not the primary silhouettes), each
    shaded ``c · (a + (1 - a) · p)`` (0 for faces turned from the light, as in ``shadow_gradients``), averaged.
 
-The bias it trades for smoothness: the shadow edge is blurred over about ``sigma + blur`` texels (its
-gradient is spread over that band, not concentrated on the edge), light bleeds where two occluders overlap
+The bias it trades for smoothness: the shadow edge is blurred over roughly ``sqrt((pi sigma / sqrt(3))² +
+blur²)`` texels, the two widths in quadrature (its gradient is spread over that band, not concentrated on the edge), light bleeds where two occluders overlap
 (the bound is an upper bound), and receivers close to their occluders come out too bright. Every face is in
 the map, receivers too, and the blur pads the map by repeating its border texels: within about two texels
 of the map's edge that flattens a receiver's depth ramp, so with a wide blur the receiver lies behind its own
