@@ -275,13 +275,10 @@ def _batches(N, Nv, steps, batch, drawn, first, g):
 
 def retrieve(train, images: torch.Tensor) -> torch.Tensor:
     """(B,) int64 the index of the training shape whose view-0 image is nearest (sum of squared differences)
-    to each of images (B, H, W, 3): the retrieval baseline, a lookup with no 3D reasoning at all."""
-    if images.ndim != 4 or images.shape[1:] != train.images.shape[2:]:
-        raise ValueError(f"images must be (B, {', '.join(map(str, train.images.shape[2:]))}) like the training "
-                         f"set's views, got shape {tuple(images.shape)}")
-    flat = train.images[:, 0].reshape(len(train), -1).double()        # (N, H W 3)
-    query = images.reshape(images.shape[0], -1).double()              # (B, H W 3)
-    return torch.cdist(query, flat).argmin(1)
+    to each of images (B, H, W, 3): the retrieval baseline, a lookup with no 3D reasoning at all
+    (``table.retrieve_shape`` with every input from view 0)."""
+    from .table import retrieve_shape
+    return retrieve_shape(train, images, "first")
 
 
 def shape_scores(pred, target, *, resolution: int = 32, samples: int = 2000, target_voxels=None) -> dict:
