@@ -232,7 +232,8 @@ def voxelize(mesh, resolution: int = 32) -> torch.Tensor:
     Entry [i, j, k] is the voxel centred at ``(x_i, y_j, z_k)``, ``x_i = -1 + (i + 0.5) 2 / R`` (the same for
     y and z). For each (x_i, y_j) column a ray runs along +z; a centre is inside when the number of faces the
     ray crosses below its z is odd. Computed in float64; a mesh that is not closed gives a meaningless result
-    (check ``shapes.boundary_edges``). Cost: F × R² crossing tests, then F × R³ comparisons, in chunks.
+    (check ``shapes.boundary_edges``). Cost: F × R² crossing tests, then each column's crossings sorted and
+    the centres counted against them, in chunks.
     """
     R = _check_count(resolution, "resolution")
     if not isinstance(mesh, Mesh):
@@ -241,11 +242,12 @@ def voxelize(mesh, resolution: int = 32) -> torch.Tensor:
     centres = -1 + (torch.arange(R, dtype=torch.float64, device=verts.device) + 0.5) * (2 / R)  # (R,)
     xy = torch.stack(torch.meshgrid(centres, centres, indexing="ij"), -1).reshape(-1, 2)  # (R², 2) column i, j
     occupancy = torch.zeros(R * R, R, dtype=torch.bool, device=verts.device)
-    chunk = max(1, 2 ** 22 // max(1, faces.shape[0] * R))              # columns per chunk: ~4M comparisons
+    chunk = max(1, 2 ** 17 // max(1, faces.shape[0]))                 # columns per chunk: ~128K crossing tests
     for start in range(0, R * R, chunk):
         hit, depth = _column_crossings(verts, faces, xy[start:start + chunk])  # (F, n) each
-        below = hit[..., None] & (depth[..., None] < centres)          # (F, n, R) crossings below each centre
-        occupancy[start:start + chunk] = below.sum(0) % 2 == 1
+        crossings = torch.where(hit, depth, torch.inf).T.sort(1).values.contiguous()  # (n, F) ascending per column
+        below = torch.searchsorted(crossings, centres.expand(crossings.shape[0], R).contiguous())  # (n, R) crossings
+        occupancy[start:start + chunk] = below % 2 == 1                # below each centre: odd means inside
     return occupancy.reshape(R, R, R)
 
 
