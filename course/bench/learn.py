@@ -1,22 +1,28 @@
-"""The learning benchmark: ``python -m course bench learn [--quick] [--save FILE] [--parts ...]``.
+"""The learning benchmark: ``python -m course bench learn [--quick] [--parts all|table|mvtn|diversity] [--save FILE]``.
 
-Two questions of lecture 13, each answered by training from scratch on the CPU (about 6 minutes at the
-defaults with one thread on a quiet machine, about twice that when other jobs share the cores; the
-reconstruction is 3 to 8 of them, MVTN 3 to 5; ``--quick`` runs a tiny version of everything in seconds):
+Lecture 13's questions, each answered by training from scratch on the CPU (about 15 minutes at the defaults on
+2 cores; ``--quick`` runs a tiny version of everything in seconds):
 
-* **reconstruction** (Kato et al. 2018's Table 1, made here): ``learn.train_reconstructor`` on
-  ``--n-train`` shapes of each of the six training families, rendered from ``--views`` views (input view 0,
-  a random pair of views per shape and step as targets), then ``learn.evaluate_reconstruction`` on
-  ``--n-test`` new shapes per family and on the held-out torus: voxel IoU at 32³ and Chamfer distance
-  (a fraction of the target's diagonal) of the network, of retrieval (the training shape with the nearest
-  input image) and of the untrained sphere. ``--save FILE`` writes the trained network (float32 weights,
-  ``learn.save_reconstructor``).
-* **mvtn** (Hamdi et al. 2021): ``mvtn.train_mvtn`` classifies the six families from ``--mvtn-views``
-  soft silhouettes, with the views fixed on a circle and learned through the renderer (``--mvtn-modes``:
-  also "predicted", a view per object from its points, MVTN proper), over ``--mvtn-seeds``: test accuracy
-  mean ± spread (half the range) and the learned view directions.
+* **table** (Kato et al. 2018's Table 1, made on the course's families): the mesh network
+  (``reconstruction.train_reconstructor``) and the voxel network (``voxels.train_voxel_reconstructor``), trained
+  on the same batches of ``--n-train`` shapes of each of the six training families rendered from ``--views``
+  views, then scored with every row of ``learning.table`` (retrieval, clustering, the oracle nearest training
+  shape, the sphere) on ``--n-test`` new shapes per family and on the held-out torus: voxel IoU at 32³,
+  point-to-surface Chamfer and the F-score at ``--fscore``, per family, each row paired against the mesh
+  network (mean difference ± standard error over the shapes). Once for each input protocol (``--protocols``:
+  view 0 of every shape, as lecture 13 once had it, and any view, as Kato et al.), each followed by the test
+  shapes split by how near their nearest training twin is (``table.novelty_rows``). ``--save`` and
+  ``--save-voxel`` write the two networks trained on inputs from any view (the shipped checkpoints).
+* **diversity**: the mesh network against retrieval and the oracle as the training set shrinks
+  (``--diversity-n`` shapes per family, inputs from any view, no voxel network).
+* **mvtn** (Hamdi et al. 2021): ``mvtn.train_mvtn`` classifies the six families from ``--mvtn-views`` soft
+  silhouettes with the views on a fixed circle, on a fixed sphere, learned once for all shapes, or predicted
+  per shape from its points (MVTN proper), the same recipe for every mode, over ``--mvtn-seeds``; the shapes
+  turned by random rotations (``--mvtn-rotated``; upright too on request): accuracy mean ± standard error over
+  the seeds and the views each run ends with.
 
-It prints a table per part and returns the rows (one per family and method; one per MVTN run).
+It prints a table per part and returns the rows (one per family, split, protocol and method; one per novelty
+group; one per MVTN run).
 """
 from __future__ import annotations
 
@@ -24,72 +30,32 @@ import time
 
 import torch
 
-from ..learning.reconstruction import ReconstructionSettings, evaluate_reconstruction, save_reconstructor, train_reconstructor
+from ..learning.reconstruction import ReconstructionSettings, save_reconstructor, train_reconstructor
 from ..learning.data import make_splits
+from ..learning.mvtn import MODES
 
-__all__ = ["bench_reconstruction", "bench_mvtn", "add_arguments", "run"]
+__all__ = ["bench_table", "bench_diversity", "bench_mvtn", "add_arguments", "run"]
 
 REPEAT = 1
 DESCRIPTION = ("learning through the renderer: single-image reconstruction against retrieval and a sphere "
                "(voxel IoU, Chamfer), and MVTN's learned views against fixed ones (accuracy)")
-QUICK = dict(n_train=4, n_test=2, views=4, steps=4, batch=4, mvtn_train=4, mvtn_test=2, mvtn_steps=3,
-             mvtn_seeds=[0], table_views=4, clusters=4, diversity_n=[2, 3], protocols=["all"])
+QUICK = dict(n_train=4, n_test=2, views=4, steps=4, batch=4, mvtn_train=4, mvtn_test=2, mvtn_steps=3, mvtn_batch=8,
+             mvtn_seeds=[0, 1], clusters=4, diversity_n=[2, 3], protocols=["all"])
 
 
-def bench_reconstruction(n_train=100, n_test=20, views=8, steps=1200, batch=16, lr=2e-3, seed=0, save=None,
-                         progress=True) -> list:
-    """Train, evaluate and print the per-family table; returns its rows (``evaluate_reconstruction``'s)."""
-    settings = ReconstructionSettings(seed=seed)
-    t0 = time.perf_counter()
-    splits = make_splits(n_train, 1, n_test, views=views, size=settings.size, dtype=torch.float32, seed=seed,
-                         progress=progress)
-    t_data = time.perf_counter() - t0
-    model, losses = train_reconstructor(splits["train"], settings=settings, steps=steps, batch=batch, views=2,
-                                        lr=lr, seed=seed, progress=progress)
-    t_train = time.perf_counter() - t0 - t_data
-    rows = []
-    for split in ("test", "held_out"):
-        rows += evaluate_reconstruction(model, splits["train"], splits[split], split=split, progress=progress)
-    t_all = time.perf_counter() - t0
-    head = min(len(losses), 50)
-    print(f"reconstruction: {n_train} training shapes per family x {len(splits['train'].families)} families, "
-          f"{views} views at {settings.size} px, {steps} steps of {batch} shapes (random view pairs), Adam lr "
-          f"{lr:g} cosine; loss {sum(losses[:head]) / max(head, 1):.3f} (first 50) -> "
-          f"{sum(losses[-head:]) / max(head, 1):.3f} (last 50)")
-    print(f"time: data {t_data:.0f} s, training {t_train:.0f} s, evaluation {t_all - t_data - t_train:.0f} s")
-    print("voxel IoU at 32^3 (higher is better) and Chamfer distance / target diagonal (lower is better), input "
-          "view 0")
-    print(f"{'split':<9} {'family':<9} {'n':>3} | {'IoU net':>7} {'retr.':>6} {'sphere':>6} | "
-          f"{'CD net':>7} {'retr.':>6} {'sphere':>6}")
-    for r in rows:
-        if r["family"] == "mean" and sum(q["split"] == r["split"] for q in rows) == 2:
-            continue                                                   # one family: its mean is its row
-        print(f"{r['split']:<9} {r['family']:<9} {r['n']:>3} | {r['iou_network']:>7.3f} {r['iou_retrieval']:>6.3f} "
-              f"{r['iou_sphere']:>6.3f} | {r['chamfer_network']:>7.4f} {r['chamfer_retrieval']:>6.4f} "
-              f"{r['chamfer_sphere']:>6.4f}")
-    if save:
-        mean = next(r for r in rows if r["split"] == "test" and r["family"] == "mean")
-        note = (f"python -m course bench learn --save (n_train={n_train}, views={views}, steps={steps}, "
-                f"batch={batch}, lr={lr:g}, seed={seed}); test voxel IoU {mean['iou_network']:.3f} (retrieval "
-                f"{mean['iou_retrieval']:.3f}, sphere {mean['iou_sphere']:.3f})")
-        save_reconstructor(model, save, note)
-        print(f"checkpoint written to {save}: {note}")
-    return rows
-
-
-def bench_mvtn(n_train=40, n_test=20, views=4, steps=150, seeds=(0, 1, 2), modes=("fixed", "learned"),
-               progress=True, plot=None, rotations=(False,)) -> list:
+def bench_mvtn(n_train=40, n_test=20, views=4, steps=100, seeds=(0, 1, 2, 3, 4), modes=MODES, progress=True,
+               plot=None, rotations=(True,), batch=16) -> list:
     """Fixed against learned (and predicted) views over ``seeds``: train, test, print; returns one row per
     (mode, seed) with the accuracy and the views (for "predicted": their mean over the test shapes). plot: a
     file for ``mvtn.plot_view_directions`` of every run's views."""
     rows = []
     for rotate in rotations:
-        rows += _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot if not rotate else None,
-                                 rotate)
+        rows += _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress,
+                                 plot if rotate == rotations[0] else None, rotate, batch)
     return rows
 
 
-def _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot, rotate) -> list:
+def _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot, rotate, batch) -> list:
     from ..learning.mvtn import MVTNSettings, evaluate_mvtn, make_mvtn_data, plot_view_directions, train_mvtn
     t0 = time.perf_counter()
     train, test = make_mvtn_data(n_train, n_test, seed=0, rotate=rotate)
@@ -98,7 +64,7 @@ def _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot
         for seed in seeds:
             t1 = time.perf_counter()
             model, _ = train_mvtn(train, settings=MVTNSettings(views=views, mode=mode, seed=seed), steps=steps,
-                                  seed=seed, progress=progress)
+                                  batch=batch, seed=seed, progress=progress)
             accuracy = evaluate_mvtn(model, test)
             with torch.no_grad():
                 az, el = model.view_angles(test.meshes if mode == "predicted" else None)
@@ -110,12 +76,17 @@ def _bench_mvtn_once(n_train, n_test, views, steps, seeds, modes, progress, plot
                              elevations=[round(e, 1) for e in el.tolist()], azimuth_spread=round(spread, 1)))
     print(f"\nMVTN: {len(train) // len(train.families)} training / {n_test} test shapes per family"
           f"{', each turned by its own random rotation' if rotate else ', upright'}, {views} soft silhouettes at "
-          f"32 px, {steps} steps of 24, the same recipe for every mode; {time.perf_counter() - t0:.0f} s")
+          f"32 px, {steps} steps of {batch}, the same recipe for every mode; {time.perf_counter() - t0:.0f} s")
     print(f"{'views':<10} {'accuracy (mean ± standard error over seeds)':<44} per seed")
     for mode in modes:
         acc = torch.tensor([r["accuracy"] for r in rows if r["mode"] == mode], dtype=torch.float64)
         se = float(acc.std(unbiased=True)) / len(acc) ** 0.5 if len(acc) > 1 else float("nan")
         print(f"{mode:<10} {float(acc.mean()):.3f} ± {se:.3f}{'':<30} " + " ".join(f"{a:.3f}" for a in acc.tolist()))
+    base = torch.tensor([r["accuracy"] for r in rows if r["mode"] == modes[0]], dtype=torch.float64)
+    for mode in modes[1:]:                                             # the same seed: the same start and batches
+        d = torch.tensor([r["accuracy"] for r in rows if r["mode"] == mode], dtype=torch.float64) - base
+        se = float(d.std(unbiased=True)) / len(d) ** 0.5 if len(d) > 1 else float("nan")
+        print(f"{mode} - {modes[0]}, paired by seed: {float(d.mean()):+.3f} ± {se:.3f}")
     for r in rows:
         if r["mode"] != "fixed":
             extra = f" (mean over test shapes; azimuth sd {r['azimuth_spread']})" if r["mode"] == "predicted" else ""
@@ -158,7 +129,7 @@ def _print_table(rows, title):
     print(title)
     print("voxel IoU at 32^3 per family; each method's mean, then (for the others) its paired difference from the "
           "mesh network +- standard error")
-    head = f"{'split':<9} {'family':<9} {'n':>3} | " + " ".join(f"{m:>16}" for m in methods)
+    head = f"{'split':<9} {'family':<9} {'n':>3} | " + " ".join(f"{m:>19}" for m in methods)
     print(head)
     for metric in ("iou", "chamfer", "fscore"):
         if metric != "iou":
@@ -170,21 +141,30 @@ def _print_table(rows, title):
             for m in methods:
                 value = r[f"{metric}_{m}"]
                 if m == "mesh":
-                    cells.append(f"{value:>16.3f}")
+                    cells.append(f"{value:>19.3f}")
                 else:
-                    cells.append(f"{value:6.3f} {r[f'{metric}_{m}_diff']:+.3f}±{r[f'{metric}_{m}_se']:.3f}"[:16]
-                                 .rjust(16))
+                    cells.append(f"{value:6.3f} {r[f'{metric}_{m}_diff']:+.3f}±{r[f'{metric}_{m}_se']:.3f}".rjust(19))
             print(f"{r['split']:<9} {r['family']:<9} {r['n']:>3} | " + " ".join(cells))
 
 
-def bench_table(n_train=100, n_test=20, views=24, steps=1200, batch=16, lr=2e-3, seed=0, protocols=("first", "all"),
+def _print_novelty(rows):
+    methods = [m for m in ("voxel", "retrieval", "oracle") if f"iou_{m}" in rows[0]]
+    print("test shapes by their nearest training twin (the oracle's IoU), farthest first: mean voxel IoU; the others "
+          "as their difference from the mesh network +- standard error")
+    print(f"{'oracle IoU':<13} {'n':>3} | {'mesh':>6} " + " ".join(f"{m:>19}" for m in methods))
+    for r in rows:
+        print(f"{r['oracle_low']:.3f}-{r['oracle_high']:.3f}  {r['n']:>3} | {r['iou_mesh']:6.3f} " + " ".join(
+            f"{r[f'iou_{m}']:6.3f} {r[f'iou_{m}_diff']:+.3f}±{r[f'iou_{m}_se']:.3f}".rjust(19) for m in methods))
+
+
+def bench_table(n_train=100, n_test=20, views=24, steps=800, batch=16, lr=2e-3, seed=0, protocols=("first", "all"),
                 clusters=30, voxels=True, threshold=0.05, save=None, save_voxel=None, progress=True) -> list:
     """Kato et al.'s Table 1 on the course's families under each input protocol: train the mesh network and the
     voxel network on the same batches (``reconstruction.training_batches``), score every row of
     ``learning.table`` on the test families and the held-out torus, print per-family means with paired
     standard errors against the mesh network; returns the rows (with ``protocol`` and seconds per part)."""
     from ..learning.data import voxelize
-    from ..learning.table import cluster_shapes, score_predictions, table_rows
+    from ..learning.table import cluster_shapes, novelty_rows, score_predictions, table_rows
     from ..learning.voxels import VoxelSettings, save_voxel_reconstructor, train_voxel_reconstructor
     settings = ReconstructionSettings(seed=seed)
     t0 = time.perf_counter()
@@ -217,6 +197,8 @@ def bench_table(n_train=100, n_test=20, views=24, steps=1200, batch=16, lr=2e-3,
                                  (train_grids, labels, representatives, grids[split]))
             scores = score_predictions(preds, test, test_grids=grids[split], threshold=threshold, progress=progress)
             part += table_rows(scores, test, split=split)
+            if split == "test":
+                novelty = novelty_rows(scores)
         t_score = time.perf_counter() - t1 - t_mesh - t_voxel
         for r in part:
             r.update(part="table", protocol=protocol, seconds_mesh=t_mesh, seconds_voxel=t_voxel,
@@ -224,8 +206,9 @@ def bench_table(n_train=100, n_test=20, views=24, steps=1200, batch=16, lr=2e-3,
         _print_table(part, f"\ninputs: {'view 0 of every shape' if protocol == 'first' else 'any view'} "
                            f"({protocol}); time: mesh network {t_mesh:.0f} s, voxel network {t_voxel:.0f} s, "
                            f"scoring {t_score:.0f} s")
-        rows += part
-        if protocol == protocols[0]:
+        _print_novelty(novelty)
+        rows += part + [dict(r, part="novelty", protocol=protocol) for r in novelty]
+        if protocol == ("all" if "all" in protocols else protocols[0]):
             if save:
                 mean = next(r for r in part if r["split"] == "test" and r["family"] == "mean")
                 save_reconstructor(mesh_net, save, f"python -m course bench learn --parts table (n_train={n_train}, "
@@ -239,7 +222,7 @@ def bench_table(n_train=100, n_test=20, views=24, steps=1200, batch=16, lr=2e-3,
     return rows
 
 
-def bench_diversity(ns=(12, 25, 50, 100), n_test=20, views=24, steps=1200, batch=16, lr=2e-3, seed=0, clusters=30,
+def bench_diversity(ns=(12, 25, 50, 100), n_test=20, views=24, steps=800, batch=16, lr=2e-3, seed=0, clusters=30,
                     threshold=0.05, progress=True) -> list:
     """The mesh network (inputs from any view) against the lookups as the training set grows: one ``bench_table``
     run per number of training shapes per family, without the voxel network; prints one line per run."""
@@ -248,51 +231,59 @@ def bench_diversity(ns=(12, 25, 50, 100), n_test=20, views=24, steps=1200, batch
         part = bench_table(n, n_test, views, steps, batch, lr, seed, ("all",), min(clusters, 6 * n), False,
                            threshold, progress=progress)
         for r in part:
-            r.update(part="diversity", n_train=n)
+            r.update(part="diversity" if r["part"] == "table" else "diversity novelty", n_train=n)
         rows += part
-    print("\ndiversity: test-family mean voxel IoU as the training set grows (inputs from any view)")
-    print(f"{'n/family':>8} | {'mesh':>6} {'retrieval':>16} {'oracle':>16}")
+    print("\ndiversity: mean voxel IoU as the training set grows (inputs from any view); retrieval and the oracle also "
+          "as their difference from the mesh network +- standard error")
+    print(f"{'n/family':>8} | {'mesh':>6} {'retrieval':>19} {'oracle':>19} | {'torus: mesh':>11} {'retrieval':>19}")
     for n in ns:
-        r = next(q for q in rows if q["n_train"] == n and q["split"] == "test" and q["family"] == "mean")
+        r = next(q for q in rows if q["n_train"] == n and q.get("split") == "test" and q["family"] == "mean")
+        t = next(q for q in rows if q["n_train"] == n and q.get("split") == "held_out" and q["family"] != "mean")
         print(f"{n:>8} | {r['iou_mesh']:6.3f} " + " ".join(
-            f"{r[f'iou_{m}']:6.3f} {r[f'iou_{m}_diff']:+.3f}±{r[f'iou_{m}_se']:.3f}" for m in ("retrieval", "oracle")))
+            f"{r[f'iou_{m}']:6.3f} {r[f'iou_{m}_diff']:+.3f}±{r[f'iou_{m}_se']:.3f}" for m in ("retrieval", "oracle"))
+            + f" | {t['iou_mesh']:11.3f} {t['iou_retrieval']:6.3f} {t['iou_retrieval_diff']:+.3f}±"
+              f"{t['iou_retrieval_se']:.3f}")
     return rows
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--parts", choices=("both", "reconstruction", "mvtn", "table", "diversity"), default="both",
-                        help="which benchmark to run (default both: the shipped network's recipe and MVTN, 6 to 13 "
-                             "minutes on one core; table: Table 1's rows under both input protocols; diversity: "
-                             "the mesh network, retrieval and the oracle as the training set shrinks)")
+    parser.add_argument("--parts", choices=("all", "table", "mvtn", "diversity"), default="all",
+                        help="which benchmark to run (default all: Table 1 under both input protocols, with the "
+                             "test shapes by their nearest training twin, then MVTN's four view modes on rotated "
+                             "shapes; about 15 minutes on 2 cores; diversity: the mesh network against the lookups "
+                             "as the training set shrinks, about 2 minutes a size)")
     parser.add_argument("--protocols", nargs="+", choices=("first", "all"), default=["first", "all"],
                         help="table: input images from view 0 of every shape (first) or any view (all)")
-    parser.add_argument("--table-views", type=int, default=24, help="table: rendered views per shape (Kato's 24)")
     parser.add_argument("--no-voxels", action="store_true", help="table: leave the voxel network out")
     parser.add_argument("--clusters", type=int, default=30, help="table: k of the clustering baseline")
-    parser.add_argument("--fscore", type=float, default=0.05, help="table: the F-score's distance threshold")
+    parser.add_argument("--fscore", type=float, default=0.05, help="table: the F-score's distance threshold (a "
+                                                                   "fraction of the target's diagonal)")
     parser.add_argument("--diversity-n", nargs="+", type=int, default=[12, 25, 50, 100],
                         help="diversity: training shapes per family, one run each (inputs from any view)")
-    parser.add_argument("--save-voxel", default="", help="table: write the voxel network here ('' for nowhere)")
-    parser.add_argument("--mvtn-rotated", nargs="+", choices=("upright", "rotated"), default=["upright"],
-                        help="MVTN: the shapes upright, each turned by a random rotation, or both")
-    parser.add_argument("--quick", action="store_true", help="a tiny run of everything (seconds): a smoke test")
-    parser.add_argument("--n-train", type=int, default=100, help="reconstruction: training shapes per family")
-    parser.add_argument("--n-test", type=int, default=20, help="reconstruction: test shapes per family")
-    parser.add_argument("--views", type=int, default=8, help="reconstruction: rendered views per shape")
-    parser.add_argument("--steps", type=int, default=1200, help="reconstruction: training steps")
-    parser.add_argument("--batch", type=int, default=16, help="reconstruction: shapes per step")
-    parser.add_argument("--lr", type=float, default=2e-3, help="reconstruction: Adam's initial learning rate")
-    parser.add_argument("--seed", type=int, default=0, help="reconstruction: data, weights and order")
-    parser.add_argument("--save", default="", help="write the trained reconstructor here ('' for nowhere)")
+    parser.add_argument("--n-train", type=int, default=100, help="table: training shapes per family")
+    parser.add_argument("--n-test", type=int, default=20, help="table: test shapes per family")
+    parser.add_argument("--views", type=int, default=24, help="table: rendered views per shape (Kato et al.'s 24)")
+    parser.add_argument("--steps", type=int, default=800, help="table: training steps of each network")
+    parser.add_argument("--batch", type=int, default=16, help="table: shapes per step")
+    parser.add_argument("--lr", type=float, default=2e-3, help="table: Adam's initial learning rate")
+    parser.add_argument("--seed", type=int, default=0, help="table: data, weights and order")
+    parser.add_argument("--save", default="", help="table: write the mesh network trained on inputs from any view "
+                                                   "here ('' for nowhere)")
+    parser.add_argument("--save-voxel", default="", help="table: write the voxel network trained on inputs from any "
+                                                         "view here ('' for nowhere)")
     parser.add_argument("--mvtn-train", type=int, default=40, help="MVTN: training shapes per family")
     parser.add_argument("--mvtn-test", type=int, default=20, help="MVTN: test shapes per family")
     parser.add_argument("--mvtn-views", type=int, default=4, help="MVTN: views per shape")
-    parser.add_argument("--mvtn-steps", type=int, default=150, help="MVTN: training steps")
-    parser.add_argument("--mvtn-seeds", nargs="+", type=int, default=[0, 1, 2], help="MVTN: seeds (weights)")
-    parser.add_argument("--mvtn-modes", nargs="+", choices=("fixed", "sphere", "learned", "predicted"),
-                        default=["fixed", "learned"], help="MVTN: how the views are chosen (predicted: per object, "
-                                                           "about 4 more minutes)")
+    parser.add_argument("--mvtn-steps", type=int, default=100, help="MVTN: training steps")
+    parser.add_argument("--mvtn-batch", type=int, default=16, help="MVTN: shapes per step")
+    parser.add_argument("--mvtn-seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4], help="MVTN: seeds (weights)")
+    parser.add_argument("--mvtn-modes", nargs="+", choices=MODES, default=list(MODES),
+                        help="MVTN: how the views are chosen (fixed circle, fixed sphere, one learned set, "
+                             "predicted per object)")
+    parser.add_argument("--mvtn-rotated", nargs="+", choices=("upright", "rotated"), default=["rotated"],
+                        help="MVTN: each shape turned by its own random rotation (default), upright, or both")
     parser.add_argument("--plot", default="", help="MVTN: draw the view directions on a sphere in this file")
+    parser.add_argument("--quick", action="store_true", help="a tiny run of everything (seconds): a smoke test")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -302,18 +293,15 @@ def run(args) -> list[dict]:
             setattr(args, key, value)
     progress = not getattr(args, "no_progress", False)
     rows = []
-    if args.parts in ("both", "reconstruction"):
-        rows += bench_reconstruction(args.n_train, args.n_test, args.views, args.steps, args.batch, args.lr,
-                                     args.seed, args.save or None, progress)
-    if args.parts == "table":
-        rows += bench_table(args.n_train, args.n_test, args.table_views, args.steps, args.batch, args.lr, args.seed,
+    if args.parts in ("all", "table"):
+        rows += bench_table(args.n_train, args.n_test, args.views, args.steps, args.batch, args.lr, args.seed,
                             tuple(args.protocols), args.clusters, not args.no_voxels, args.fscore, args.save or None,
                             args.save_voxel or None, progress)
     if args.parts == "diversity":
-        rows += bench_diversity(tuple(args.diversity_n), args.n_test, args.table_views, args.steps, args.batch,
-                                args.lr, args.seed, args.clusters, args.fscore, progress)
-    if args.parts in ("both", "mvtn"):
+        rows += bench_diversity(tuple(args.diversity_n), args.n_test, args.views, args.steps, args.batch, args.lr,
+                                args.seed, args.clusters, args.fscore, progress)
+    if args.parts in ("all", "mvtn"):
         rows += bench_mvtn(args.mvtn_train, args.mvtn_test, args.mvtn_views, args.mvtn_steps, args.mvtn_seeds,
                            args.mvtn_modes, progress, getattr(args, "plot", "") or None,
-                           tuple(r == "rotated" for r in getattr(args, "mvtn_rotated", ["upright"])))
+                           tuple(r == "rotated" for r in args.mvtn_rotated), args.mvtn_batch)
     return rows

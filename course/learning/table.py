@@ -37,7 +37,7 @@ from ..tensors import _check_count, _check_real
 from .data import voxel_iou, voxelize
 
 __all__ = ["INPUT_VIEWS", "input_views", "retrieve_shape", "cluster_shapes", "oracle_shapes", "score_predictions",
-           "table_rows", "METHODS"]
+           "table_rows", "novelty_rows", "METHODS"]
 
 INPUT_VIEWS = ("first", "all")
 METHODS = ("mesh", "voxel", "retrieval", "clustering", "oracle", "sphere")
@@ -180,5 +180,35 @@ def table_rows(scores: dict, test, *, split: str = "test", baseline: str = "mesh
                     row[f"{metric}_{method}_diff"] = float(d.mean())
                     row[f"{metric}_{method}_se"] = (float(d.std(unbiased=True)) / math.sqrt(d.numel())
                                                     if d.numel() > 1 else float("nan"))
+        rows.append(row)
+    return rows
+
+
+def novelty_rows(scores: dict, *, bins: int = 3, baseline: str = "mesh", metric: str = "iou") -> list:
+    """The test shapes split by how near their nearest training twin is: sorted by the oracle's IoU (the best
+    IoU of any training shape, which depends on the data alone, not on any method) and cut into ``bins``
+    groups of (nearly) equal size, nearest twins last. One row per group: its oracle-IoU range, n, each
+    method's mean ``metric`` and, for the others, the paired difference from ``baseline`` ± its standard
+    error. A diversity axis that needs no retraining: where the training set holds no near-twin, a lookup has
+    nothing close to return, and a network that generalizes should gain on it."""
+    if "oracle" not in scores:
+        raise ValueError("novelty_rows needs the oracle's scores (the nearest training shape's IoU)")
+    bins = _check_count(bins, "bins")
+    near = scores["oracle"]["iou"]
+    order = near.argsort()
+    rows = []
+    for k, members in enumerate(order.tensor_split(bins)):
+        if members.numel() == 0:
+            continue
+        row = {"bin": k, "n": int(members.numel()), "oracle_low": float(near[members].min()),
+               "oracle_high": float(near[members].max())}
+        for method, metrics in scores.items():
+            v = metrics[metric][members]
+            row[f"{metric}_{method}"] = float(v.mean())
+            if method != baseline and baseline in scores:
+                d = v - scores[baseline][metric][members]
+                row[f"{metric}_{method}_diff"] = float(d.mean())
+                row[f"{metric}_{method}_se"] = (float(d.std(unbiased=True)) / math.sqrt(d.numel())
+                                                if d.numel() > 1 else float("nan"))
         rows.append(row)
     return rows

@@ -35,7 +35,9 @@ from ..tensors import _check_count, _check_real
 from .reconstruction import _per_shape_cameras, image_encoder, training_batches
 
 __all__ = ["VoxelSettings", "VoxelReconstructor", "project_occupancy", "voxel_loss", "train_voxel_reconstructor",
-           "voxel_mesh", "save_voxel_reconstructor", "load_voxel_reconstructor"]
+           "voxel_mesh", "save_voxel_reconstructor", "load_voxel_reconstructor", "load_pretrained_voxel_reconstructor"]
+
+PRETRAINED = Path(__file__).parents[1] / "data" / "voxel_reconstructor.pt"
 
 
 @dataclass(frozen=True)
@@ -210,3 +212,13 @@ def load_voxel_reconstructor(path) -> VoxelReconstructor:
     model.load_state_dict(data["state_dict"])
     model.note = data.get("note", "")
     return model.eval()
+
+
+def load_pretrained_voxel_reconstructor() -> VoxelReconstructor:
+    """The voxel network shipped with the course (``course/data/voxel_reconstructor.pt``), never downloaded: made
+    by ``python -m course bench learn --parts table --save-voxel course/data/voxel_reconstructor.pt`` at the
+    bench's defaults (inputs from any view, seed 0, float32 weights); ``model.note`` repeats its recipe and score."""
+    if not PRETRAINED.is_file():
+        raise ValueError(f"the shipped checkpoint {PRETRAINED} is missing; remake it with python -m course bench "
+                         "learn --parts table --save-voxel course/data/voxel_reconstructor.pt")
+    return load_voxel_reconstructor(PRETRAINED)
