@@ -154,3 +154,32 @@ def test_bad_training_input(four_views):
         train_reconstructor(four_views, steps=1)                             # 16 px data, a 32 px network
     with pytest.raises(ValueError, match="lr"):
         train_reconstructor(four_views, settings=SETTINGS, steps=1, lr=0.0)
+
+
+# The test-family mean voxel IoU of the two shipped networks in README's Table 1 (python -m course bench learn,
+# inputs from any view): the checkpoints, run on the bench's 120 test shapes with the bench's input views, must
+# give them back. The networks are float32, so the last digit may move on another CPU.
+README_MEANS = {"mesh": 0.643, "voxel": 0.618}
+
+
+def test_the_shipped_networks_reproduce_the_readme_means():
+    from course.learning.data import voxel_iou, voxelize
+    from course.learning.table import input_views
+    from course.learning.voxels import load_pretrained_voxel_reconstructor
+    data = make_dataset(20, families=("box", "cylinder", "cone", "capsule", "vase", "star"), split="test", views=24,
+                        size=32, dtype=torch.float32)
+    images = data.images[torch.arange(len(data)), input_views(data, "all", seed=1)]
+    mesh, voxel = load_pretrained_reconstructor(), load_pretrained_voxel_reconstructor()
+    assert "inputs all" in mesh.note and "inputs all" in voxel.note
+    with torch.no_grad():
+        verts, occupancy = mesh(images), voxel(images)
+    truth = [voxelize(m) for m in data.meshes]
+    iou = {"mesh": [voxel_iou(voxelize(Mesh(v.double(), mesh.faces)), t) for v, t in zip(verts, truth)],
+           "voxel": [voxel_iou(o > 0.5, t) for o, t in zip(occupancy, truth)]}
+    for method, values in iou.items():
+        assert abs(sum(values) / len(values) - README_MEANS[method]) < 2e-3, method
+    from pathlib import Path
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    table = readme[readme.index("### Learning through the renderer"):]
+    assert f"| mesh network | {README_MEANS['mesh']:.3f} |" in table
+    assert f"| voxel network | {README_MEANS['voxel']:.3f} (" in table

@@ -9,7 +9,7 @@ Kato et al.'s IoU loss, plus their smoothness loss so the sphere deforms without
     image (H, W, 3) ─encoder─▶ code (64,) ─heads─▶ verts = (sphere + offsets) · scale + translation (V, 3)
     verts ─soft_rasterize(views)─▶ (Nv, H, W) ─silhouette_iou_loss(·, targets)─▶ + λ smoothness_loss
 
-The views and the data come from ``course.learning.data`` (image of view 0 in, silhouettes of all views out).
+The views and the data come from ``course.learning.data`` (the image of one view in, silhouettes of other views out).
 The soft silhouette needs a blur of about a pixel to pass gradients from pixels the mesh misses: σ = 3e-3 in
 the NDC units of ``soft_rasterize`` is σ_px = σ W² / 4 ≈ 0.8 px² at W = 32; ``train_reconstructor`` then
 sharpens it tenfold over training, because a blurred outline is wider than the mesh's and a network fitted to
@@ -17,17 +17,16 @@ it learns meshes too small (at 32 px about a pixel all round: a third of the vol
 
 * ``train_reconstructor(train, ...)``: seeded Adam, a cosine learning rate, a random pair of the dataset's
   views per shape and step as targets, σ shrinking geometrically; a tqdm bar with ``progress=True``.
-* ``evaluate_reconstruction(model, train, test)``: per family, the voxel IoU at 32³ (``shape_data.voxelize``)
-  and the Chamfer distance (``shape_metrics``) of the network's mesh and of two baselines, *retrieval* (the
-  training shape with the nearest view-0 image, as it is) and the untrained *sphere*. Retrieval is strong
-  here, and wins on average: every input is view 0, one camera shared by every shape, so the nearest image
-  is a pose-aligned lookup; and the families vary in a handful of parameters, so among a few hundred
-  training shapes the nearest image is often a near-twin. The network has to match that by generalising,
-  not by looking up. On the held-out torus retrieval wins clearly (it answers with a cylinder or a cone);
-  the network cannot open the hole and swells its meshes in depth (``python -m course
-  bench learn`` prints the table).
+* ``training_batches``: which shapes, which input view and which supervising views each step takes, the same for
+  the voxel network (``voxels``): view 0 of every shape as the input ("first"), or any of its views ("all", as
+  Kato et al.); the supervising views are never the input.
+* ``evaluate_reconstruction(model, train, test)``: per family, the voxel IoU at 32³ (``data.voxelize``) and the
+  Chamfer distance of the network's mesh given view 0, of *retrieval* (the training shape with the nearest view-0
+  image, as it is) and of the untrained *sphere*: a quick look. Kato et al.'s whole Table 1 (the voxel network,
+  retrieval over every view, clustering, the oracle nearest shape, the F-score, both input protocols) is
+  ``learning.table``, run by ``python -m course bench learn``.
 * ``save_reconstructor`` / ``load_reconstructor`` and ``load_pretrained_reconstructor()``: the network the
-  bench's defaults train, shipped as ``course/data/reconstructor.pt`` (float32, about 0.5 MB; never
+  bench's defaults train on inputs from any view, shipped as ``course/data/reconstructor.pt`` (float32, about 0.5 MB; never
   downloaded).
 """
 from __future__ import annotations
@@ -195,7 +194,7 @@ def train_reconstructor(train, *, settings: ReconstructionSettings = Reconstruct
     view 0 of each shape (``input_views="first"``) or any of its views ("all": ``training_batches``).
 
     Each step draws ``batch`` shapes (an epoch's shuffled order, then the next) and for each shape ``views``
-    distinct views of the dataset's Nv at random, its own pair: a network that sees 8 views of every shape two
+    distinct views of the dataset's Nv at random, its own pair: a network that sees all views of every shape two
     at a time learns more of each shape's depth than one that always sees the same two, at the cost of two.
     The learning rate follows a cosine from ``lr`` down to lr / 20 over the steps (large steps while the
     sphere finds the families' outlines, small ones for the details). The blur σ of the soft silhouettes
@@ -361,8 +360,8 @@ def load_reconstructor(path) -> MeshReconstructor:
 
 def load_pretrained_reconstructor() -> MeshReconstructor:
     """The network shipped with the course (``course/data/reconstructor.pt``), never downloaded: made by
-    ``python -m course bench learn --save course/data/reconstructor.pt`` at the bench's defaults (seed 0,
-    float32 weights), so anyone can remake it; ``model.note`` repeats its recipe and its scores.
+    ``python -m course bench learn --save course/data/reconstructor.pt`` at the bench's defaults (inputs from
+    any of 24 views, seed 0, float32 weights), so anyone can remake it; ``model.note`` repeats its recipe and its scores.
     Use it to look at reconstructions without the minutes of training."""
     if not PRETRAINED.is_file():
         raise ValueError(f"the shipped checkpoint {PRETRAINED} is missing; remake it with "

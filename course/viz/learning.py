@@ -2,14 +2,15 @@
 
 ``draw_reconstruction_view(family, azimuth, elevation)`` takes the first test shape of a family (the torus from
 the held-out split), the mesh the shipped network (``load_pretrained_reconstructor``, run in float64) predicts
-from its input image (view 0: azimuth 0°, 30° up, the only view the network ever reads), and draws both hard
+from its view-0 image (azimuth 0°, 30° up; the network was trained on inputs from any of the 24 views, the
+explorer always shows it this one), and draws both hard
 silhouettes from a camera at (azimuth, elevation), 3.2 units away with a 40° field of view as in the data
 (``learning.data.view_cameras``), at 64 × 64 pixels:
 
 * left: the overlap, grey where both cover a pixel, red where only the network does (too big), blue where only
   the target does (missed);
-* right: the silhouette IoU against the azimuth at this elevation (every 30°), the 8 views that supervised the
-  training marked where they sit (30° up), the current view a dot.
+* right: the silhouette IoU against the azimuth at this elevation (every 30°), the azimuths of the 24 views the
+  network was trained on marked along the bottom (they sit 30° up), the input view a line, the current view a dot.
 
 The line it prints (``"line"``, also written under the figure, so it follows the controls): the view, its silhouette
 IoU, the network's pixels over the target's (a ratio of areas: 1 can still miss many of the target's pixels), the
@@ -36,7 +37,7 @@ F64 = torch.float64
 VIEW_FAMILIES = ("torus", "box", "cylinder", "cone", "capsule", "vase", "star")   # the first is the default
 VIEW_SIZE = 64                  # pixels a side of the explorer's views (the data's are 32)
 CURVE_STEP = 30.0               # degrees between the azimuths of the IoU curve
-TRAINING_VIEWS = 8              # the views the shipped network was trained with (bench learn: views=8)
+TRAINING_VIEWS = 24             # the views the shipped network was trained with (bench learn: views=24)
 ELEVATION = 30.0                # the data's cameras sit this far above the horizon
 GOLDEN = 180.0 * (3 - math.sqrt(5))                                        # degrees, ≈ 137.5°
 
@@ -94,12 +95,11 @@ def _curve(family: str, elevation: float):
 def draw_reconstruction_view(family: str = "torus", azimuth: float = 0.0, elevation: float = 90.0) -> dict:
     """The network's mesh and its target seen from (``azimuth``, ``elevation``) degrees: their silhouettes
     overlaid (grey both, red only the network's, blue only the target's) and the silhouette IoU along the
-    azimuth at this elevation, the 8 training views marked.
+    azimuth at this elevation, the 24 training views' azimuths marked.
 
-    It opens on the held-out torus seen from straight above, a view no training silhouette came from: the
-    network's mesh fills the hole (red). Turn the view: at azimuth 0°, 30° up (the input view) the outlines
-    agree about as well as anywhere; elsewhere the network had only the training's silhouettes of other
-    shapes to go by. Returns the view's IoU, the pixel ratio (network's pixels over the target's), the share of
+    It opens on the held-out torus seen from straight above, a view no training silhouette came from (a
+    deformed sphere cannot open the hole, so any network pixel inside it is red). Turn the view: azimuth 0°,
+    30° up is the image the network read; every other view shows what it inferred. Returns the view's IoU, the pixel ratio (network's pixels over the target's), the share of
     the target's pixels the network covers, the volume ratio and the line.
     """
     family = _explorers._check_choice("family", family, VIEW_FAMILIES)
@@ -125,9 +125,9 @@ def draw_reconstruction_view(family: str = "torus", azimuth: float = 0.0, elevat
     ax = axes[1]
     ax.plot(azimuths, curve, marker=".", color="tab:purple", label=f"silhouette IoU at {elevation:g}° up")
     trained = [((k * GOLDEN + 180.0) % 360.0) - 180.0 for k in range(TRAINING_VIEWS)]
-    for k, a in enumerate(trained):
-        ax.axvline(a, color="tab:green" if k else "tab:orange", ls=":", lw=1.0,
-                   label=("input view 0 (30° up)" if k == 0 else "training views (30° up)" if k == 1 else None))
+    ax.axvline(trained[0], color="tab:orange", ls=":", lw=1.0, label="input view 0 (30° up)")
+    ax.plot(trained, [0.02] * len(trained), "^", color="tab:green", ms=4, ls="none",
+            label=f"the {TRAINING_VIEWS} training views' azimuths (30° up)")
     ax.plot([azimuth], [iou], "o", color="tab:red", label="this view")
     ax.set_xlim(-180, 180), ax.set_ylim(0, 1), ax.set_xticks(range(-180, 181, 60))
     ax.set_xlabel("azimuth (degrees)"), ax.set_ylabel("IoU of the silhouettes")
