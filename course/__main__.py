@@ -1,4 +1,4 @@
-"""Command line: ``python -m course render | bench | grade | release | workspace | gradescope``.
+"""Command line: ``python -m course lab | render | bench | grade | release | workspace | gradescope``.
 
 Each sub-command lives beside the topic it belongs to and exposes ``cli(argv) -> int``.
 """
@@ -6,6 +6,7 @@ import importlib
 import sys
 
 COMMANDS = {
+    "lab": ("course.lab", "JupyterLab at the course root: shipped notebooks read-only, the terminal finds the course"),
     "render": ("course.render_cli", "render a mesh (or the bundled default scene) to a PNG"),
     "bench": ("course.bench", "time against error, side by side"),
     "grade": ("course.grading.grader", "grade exercise notebooks: their code in a worker, the checks in the grader"),
