@@ -256,8 +256,8 @@ def add_arguments(parser) -> None:
                         help="table: input images from view 0 of every shape (first) or any view (all)")
     parser.add_argument("--no-voxels", action="store_true", help="table: leave the voxel network out")
     parser.add_argument("--clusters", type=int, default=30, help="table: k of the clustering baseline")
-    parser.add_argument("--fscore", type=float, default=0.05, help="table: the F-score's distance threshold (a "
-                                                                   "fraction of the target's diagonal)")
+    parser.add_argument("--fscore", type=float, default=0.05, help="table: the F-score's distance threshold (world "
+                                                                   "units: the shapes fit in [-1, 1]^3)")
     parser.add_argument("--diversity-n", nargs="+", type=int, default=[12, 25, 50, 100],
                         help="diversity: training shapes per family, one run each (inputs from any view)")
     parser.add_argument("--n-train", type=int, default=100, help="table: training shapes per family")
