@@ -81,11 +81,13 @@ def cluster_shapes(grids: torch.Tensor, k: int, *, iterations: int = 50, seed: i
         raise ValueError(f"k must be at most the number of shapes ({N}), got {k}")
     g = torch.Generator().manual_seed(_check_count(seed, "seed", minimum=0))
     centres = x[torch.randint(N, (1,), generator=g)]
+    nearest = (x - centres[0]).square().sum(1).sqrt()                 # distance to the nearest centre so far
     while centres.shape[0] < k:                                        # k-means++: far shapes more likely
-        d2 = torch.cdist(x, centres).min(1).values.square()
+        d2 = nearest.square()                                          # (sums of 0s and 1s: exact integers)
         pick = torch.multinomial(d2 / d2.sum(), 1, generator=g) if float(d2.sum()) > 0 else torch.randint(
             N, (1,), generator=g)
         centres = torch.cat([centres, x[pick]])
+        nearest = torch.minimum(nearest, (x - x[pick]).square().sum(1).sqrt())
     labels = torch.full((N,), -1, dtype=torch.long)
     for _ in range(_check_count(iterations, "iterations")):
         new = torch.cdist(x, centres).argmin(1)
