@@ -168,3 +168,104 @@ def _drive(page, lab, artefacts):
     sliders = fill.locator(".widget-slider")                            # usable width at 1024 px
     assert sliders.count() == 3
     assert all(sliders.nth(i).bounding_box()["width"] >= 300 for i in range(3))
+
+
+# ---- python -m course lab: running a shipped notebook leaves git clean ----------------------------------------
+
+SMALL = ["import time", "print('first')", "time.sleep(3)\nprint('after a pause')"]
+
+
+@pytest.fixture
+def course_lab(tmp_path):
+    """JupyterLab as ``python -m course lab`` starts it (the course's server config first on JUPYTER_CONFIG_PATH),
+    over a git repository holding lectures/01_small.ipynb and work/own.ipynb, with autosave every second."""
+    pytest.importorskip("playwright.sync_api", reason="Playwright is missing: pip install playwright")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"Chromium is missing at {CHROMIUM} (apt-get install chromium)")
+    if shutil.which("git") is None:
+        pytest.skip("git is missing")
+    from course import lab as course_lab_module
+    repo = tmp_path / "repo"
+    for folder in ("lectures", "work"):
+        (repo / folder).mkdir(parents=True)
+    cells = [dict(cell_type="code", execution_count=None, metadata={}, outputs=[], source=src) for src in SMALL]
+    nb = dict(cells=cells, nbformat=4, nbformat_minor=5,
+              metadata={"kernelspec": {"display_name": "Python 3 (ipykernel)", "language": "python",
+                                       "name": "python3"}})
+    for path in (repo / "lectures" / "01_small.ipynb", repo / "work" / "own.ipynb"):
+        path.write_text(json.dumps(nb, indent=1), encoding="utf-8")
+    (repo / ".gitignore").write_text("/work/\n.ipynb_checkpoints/\n")
+    git = dict(cwd=repo, check=True, capture_output=True)
+    subprocess.run(["git", "init", "-q"], **git)
+    subprocess.run(["git", "add", "-A"], **git)
+    subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "shipped"], **git)
+    settings = tmp_path / "settings" / "@jupyterlab" / "docmanager-extension"
+    settings.mkdir(parents=True)
+    (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"autosave": True, "autosaveInterval": 1}))
+    port, token = _free_port(), "course-lab-test"
+    env = course_lab_module.lab_environment()
+    env["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
+    server = subprocess.Popen([sys.executable, "-m", "jupyter", "lab", "--no-browser", "--allow-root",
+                               f"--port={port}", f"--ServerApp.token={token}", "--ServerApp.ip=127.0.0.1",
+                               f"--ServerApp.root_dir={repo}", "--LabApp.news_url=",
+                               f"--LabApp.user_settings_dir={tmp_path / 'settings'}",
+                               "--ServerApp.open_browser=False"],
+                              cwd=repo, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(120):
+            try:
+                urllib.request.urlopen(f"{url}/api/status?token={token}", timeout=1)
+                break
+            except OSError:
+                time.sleep(0.5)
+        else:
+            pytest.fail("JupyterLab did not start within a minute")
+        yield repo, url, token
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            server.kill()
+
+
+def _run_all(page, url):
+    page.goto(url, timeout=120_000)
+    page.locator(".jp-NotebookPanel:visible .jp-Notebook").first.wait_for(timeout=120_000)
+    page.locator(".jp-StatusBar-TextItem", has_text="Idle").first.wait_for(timeout=120_000)
+    news = page.locator(".jp-Notification-Toast-Close, .Toastify__close-button").first   # "Jupyter news?"
+    if news.count():
+        news.click()
+    page.locator(".jp-NotebookPanel:visible .jp-Notebook").first.click()  # this notebook has the focus
+    page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()  # Run > Run All Cells
+    page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
+    page.locator(".jp-NotebookPanel:visible .jp-OutputArea-output",
+                 has_text="after a pause").wait_for(timeout=60_000)
+    page.wait_for_timeout(4000)                                          # four autosave intervals
+
+
+def test_running_a_shipped_notebook_leaves_git_clean(course_lab, artefacts):
+    """A shipped notebook run past several autosaves is not written (git status stays empty, the file's bytes
+    unchanged), while a notebook in work/ is autosaved as before."""
+    from playwright.sync_api import sync_playwright
+    repo, url, token = course_lab
+    shipped = repo / "lectures" / "01_small.ipynb"
+    before = shipped.read_bytes()
+    own_before = (repo / "work" / "own.ipynb").read_bytes()
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox", "--disable-gpu"])
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        try:
+            _run_all(page, f"{url}/lab/tree/lectures/01_small.ipynb?reset&token={token}")
+            page.screenshot(path=str(artefacts / "course-lab-shipped.png"))
+            _run_all(page, f"{url}/lab/tree/work/own.ipynb?reset&token={token}")
+        except Exception:
+            page.screenshot(path=str(artefacts / "course-lab-failure.png"), full_page=True)
+            raise
+        finally:
+            browser.close()
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=repo, capture_output=True, text=True).stdout
+    assert status == "" and shipped.read_bytes() == before
+    own = (repo / "work" / "own.ipynb").read_bytes()
+    assert own != own_before and b"after a pause" in own                # autosave still works in work/

@@ -106,3 +106,13 @@ def test_bad_input(data):
         training_batches(data, steps=1, batch=1, views=1, input_views="random")
     with pytest.raises(ValueError, match="at most the dataset's 3 views"):
         training_batches(data, steps=1, batch=1, views=4, input_views="all")
+
+
+def test_voxelize_all_stacks_the_grids_of_voxelize():
+    from course.learning.data import make_dataset, voxelize, voxelize_all
+    data = make_dataset(1, families=("box", "torus"), views=1, size=8, dtype=torch.float64)
+    grids = voxelize_all(data.meshes, 16, progress=True)
+    assert grids.shape == (2, 16, 16, 16) and grids.dtype == torch.bool
+    assert all(torch.equal(g, voxelize(m, 16)) for g, m in zip(grids, data.meshes))
+    with pytest.raises(ValueError, match="empty"):
+        voxelize_all([])

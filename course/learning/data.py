@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +33,7 @@ from .shapes import FAMILIES, aspect_ratio, make_shape
 from ..tensors import _check_count, _check_device, _check_real
 
 __all__ = ["ShapeSet", "SPLITS", "HELD_OUT", "BACKGROUND", "shape_seed", "view_cameras", "make_dataset", "make_splits",
-           "render_views", "voxelize", "voxel_iou", "silhouette_iou_table", "aspect_ratios"]
+           "render_views", "voxelize", "voxelize_all", "voxel_iou", "silhouette_iou_table", "aspect_ratios"]
 
 SPLITS = ("train", "val", "test", "held_out")
 HELD_OUT = ("torus",)                     # the family no model sees in training (a ring: a hole in every view)
@@ -155,9 +156,10 @@ def make_dataset(n_per_family: int, *, families=FAMILIES, seed: int = 0, split: 
     device = _check_device(device)
     cameras = _cameras(views, size, dtype, device)
     from tqdm.auto import tqdm
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
     meshes, labels, seeds, sils, images = [], [], [], [], []
     for label, family in enumerate(families):
-        for i in tqdm(range(n), desc=f"{split} {family}", disable=not progress, leave=False):
+        for i in tqdm(range(n), desc=f"{split} {family}", disable=disable, leave=False):
             s = shape_seed(seed, split, family, i)
             mesh = make_shape(family, s, dtype=dtype, device=device)
             sil, image = render_views(mesh, cameras)
@@ -249,6 +251,16 @@ def voxelize(mesh, resolution: int = 32) -> torch.Tensor:
         below = torch.searchsorted(crossings, centres.expand(crossings.shape[0], R).contiguous())  # (n, R) crossings
         occupancy[start:start + chunk] = below % 2 == 1                # below each centre: odd means inside
     return occupancy.reshape(R, R, R)
+
+
+def voxelize_all(meshes, resolution: int = 32, *, progress: bool = False) -> torch.Tensor:
+    """(N, R, R, R) bool ``voxelize`` of each of ``meshes``; progress: a tqdm bar (``TQDM_DISABLE=1`` hides it)."""
+    from tqdm.auto import tqdm
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
+    grids = [voxelize(m, resolution) for m in tqdm(meshes, desc="voxelize", disable=disable, leave=False)]
+    if not grids:
+        raise ValueError("meshes is empty")
+    return torch.stack(grids)
 
 
 def voxel_iou(a, b) -> float:

@@ -20,6 +20,7 @@ content; these statistics stay closer to colours, frequencies and orientations.
 from __future__ import annotations
 
 import math
+import os
 
 import torch
 
@@ -132,12 +133,12 @@ class RandomFeatures(torch.nn.Module):
 
 
 def synthesize_texture(style, size=(64, 64), steps: int = 300, *, seed: int = 0, lr: float = 0.2,
-                       network: RandomFeatures | None = None):
+                       network: RandomFeatures | None = None, progress: bool = False):
     """A texture of ``size`` (H, W) whose random-feature statistics match ``style`` (H', W', 3) in [0, 1].
 
     Starts from seeded noise and runs Adam on the pixels (through a sigmoid, so they stay in [0, 1]) against
-    ``style_loss``. network: the ``RandomFeatures`` to use (seeded by ``seed`` when None). Returns the image
-    (H, W, 3) and the losses per step (steps,)."""
+    ``style_loss``. network: the ``RandomFeatures`` to use (seeded by ``seed`` when None). progress: a tqdm bar
+    (``TQDM_DISABLE=1`` also hides it). Returns the image (H, W, 3) and the losses per step (steps,)."""
     steps = _check_count(steps, "steps")
     lr = _check_real(lr, "lr", low=0, low_open=True)
     H, W = (_check_count(v, "size") for v in size)
@@ -148,7 +149,9 @@ def synthesize_texture(style, size=(64, 64), steps: int = 300, *, seed: int = 0,
     logits = (0.5 * torch.randn(H, W, 3, generator=g)).requires_grad_(True)
     opt = torch.optim.Adam([logits], lr=lr)
     losses = []
-    for _ in range(steps):
+    from tqdm.auto import tqdm
+    disable = (not progress) or os.environ.get("TQDM_DISABLE", "").lower() not in ("", "0", "false")
+    for _ in tqdm(range(steps), desc="synthesize texture", disable=disable, leave=False):
         opt.zero_grad()
         loss = style_loss(net(torch.sigmoid(logits)), target)
         loss.backward()
