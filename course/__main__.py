@@ -1,4 +1,4 @@
-"""Command line: ``python -m course lab | render | bench | grade | release | workspace | gradescope``.
+"""Command line: ``python -m course lab | site | render | bench | grade | release | workspace | gradescope``.
 
 Each sub-command lives beside the topic it belongs to and exposes ``cli(argv) -> int``.
 """
@@ -13,6 +13,7 @@ COMMANDS = {
     "release": ("course.grading.release", "write exercises/ from solutions/ (or --check for drift)"),
     "workspace": ("course.grading.workspace", "copy an exercise into work/, your own folder (never overwritten)"),
     "gradescope": ("course.grading.gradescope", "build the Gradescope autograder (a zip) of one exercise"),
+    "site": ("course.site", "build the course's static website (lectures with their outputs, syllabus, README)"),
 }
 
 

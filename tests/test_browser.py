@@ -269,3 +269,37 @@ def test_running_a_shipped_notebook_leaves_git_clean(course_lab, artefacts):
     assert status == "" and shipped.read_bytes() == before
     own = (repo / "work" / "own.ipynb").read_bytes()
     assert own != own_before and b"after a pause" in own                # autosave still works in work/
+
+
+# ---- python -m course site: every page of the built site, in Chromium -----------------------------------------
+
+def test_the_site_renders_every_lecture_with_its_figures(tmp_path, artefacts):
+    """Build the site, open the index and every lecture page from disk in Chromium: every image loaded (a natural
+    width above 0), every lecture linked from the index, no internal link broken; a screenshot of lecture 13."""
+    pytest.importorskip("playwright.sync_api", reason="Playwright is missing: pip install playwright")
+    pytest.importorskip("sphinx", reason='the site needs Sphinx: pip install -e ".[site]"')
+    pytest.importorskip("myst_nb", reason='the site needs MyST-NB: pip install -e ".[site]"')
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"Chromium is missing at {CHROMIUM} (apt-get install chromium)")
+    from playwright.sync_api import sync_playwright
+
+    from course import site
+    index = site.build_site(tmp_path / "site")
+    assert site.check_links(index.parent) == []
+    lectures = sorted((ROOT / "lectures").glob("[0-9][0-9]_*.ipynb"))
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox", "--disable-gpu"])
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        try:
+            page.goto(index.as_uri())
+            hrefs = page.eval_on_selector_all("a", "els => els.map(e => e.getAttribute('href'))")
+            for notebook in lectures:
+                assert f"lectures/{notebook.stem}.html" in hrefs, notebook.stem
+                page.goto((index.parent / "lectures" / f"{notebook.stem}.html").as_uri())
+                page.wait_for_load_state("load")
+                sizes = page.eval_on_selector_all("img", "els => els.map(e => [e.complete, e.naturalWidth])")
+                assert sizes and all(done and width > 0 for done, width in sizes), (notebook.stem, sizes)
+                assert page.locator("div.body h1").count() == 1                 # the lecture's title
+            page.screenshot(path=str(artefacts / "site-lecture-13.png"))
+        finally:
+            browser.close()
