@@ -284,6 +284,8 @@ def plot_view_directions(angles: dict, path=None):
                             torch.as_tensor(elevation).detach().float()).reshape(-1, 3)
         ax.scatter(d[:, 0], d[:, 2], d[:, 1], color=f"C{i}", s=30, label=label, depthshade=False)  # y drawn up
     ax.set_xlabel("x"), ax.set_ylabel("z"), ax.set_zlabel("y (up)")
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):                       # the unit sphere: -1, 0, 1 say enough
+        axis.set_ticks([-1.0, 0.0, 1.0])
     ax.set_box_aspect((1, 1, 1))
     ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
