@@ -183,3 +183,33 @@ def test_the_shipped_networks_reproduce_the_readme_means():
     table = readme[readme.index("### Learning through the renderer"):]
     assert f"| mesh network | {README_MEANS['mesh']:.3f} |" in table
     assert f"| voxel network | {README_MEANS['voxel']:.3f} (" in table
+
+
+def test_the_networks_refuse_bad_images_and_accept_any_dtype():
+    """A NaN pixel, colours far outside [0, 1], a wrong shape or an empty batch: a ValueError that names it (the
+    shipped network used to answer NaN or vertices at 1e27). float64, float16, uint8 and numpy images run in the
+    network's own dtype; uint8 is read as 0-255."""
+    import numpy as np
+    from course.learning.voxels import load_pretrained_voxel_reconstructor
+    mesh_net, voxel_net = load_pretrained_reconstructor(), load_pretrained_voxel_reconstructor()
+    data = make_dataset(1, families=("box",), split="test", views=1, size=32, dtype=torch.float32)
+    images = data.images[:, 0]                                            # (1, 32, 32, 3) in [0, 1]
+    with torch.no_grad():
+        for net in (mesh_net, voxel_net):
+            reference = net(images)
+            for other in (images.double(), images.numpy(), images.double().numpy()):
+                torch.testing.assert_close(net(other), reference, atol=1e-5, rtol=0)
+            torch.testing.assert_close(net(images.half()), net(images.half().float()), atol=0, rtol=0)
+            as_bytes = (images * 255).round().to(torch.uint8)
+            torch.testing.assert_close(net(as_bytes), net(as_bytes.float() / 255))
+            torch.testing.assert_close(net(np.asarray(as_bytes)), net(as_bytes.float() / 255))
+            bad = images.clone()
+            bad[0, 3, 4, 1] = float("nan")
+            with pytest.raises(ValueError, match="NaN"):
+                net(bad)
+            with pytest.raises(ValueError, match=r"in \[0, 1\].*to 7.05e\+29"):
+                net(images * 1e30)
+            with pytest.raises(ValueError, match=r"must be \(B, 32, 32, 3\)"):
+                net(images[:, :16])
+            with pytest.raises(ValueError, match="empty"):
+                net(images[:0])

@@ -43,11 +43,12 @@ from ..models import icosphere
 from .data import voxel_iou, voxelize
 from ..inverse.metrics import chamfer_distance
 from ..soft import soft_rasterize
-from ..tensors import _check_count, _check_real
+from ..tensors import _check_count, _check_finite, _check_real, as_tensor
 
-__all__ = ["ReconstructionSettings", "MeshReconstructor", "reconstruction_loss", "batched_smoothness", "train_step",
-           "train_reconstructor", "retrieve", "shape_scores", "evaluate_reconstruction", "save_reconstructor",
-           "load_reconstructor", "load_pretrained_reconstructor", "PRETRAINED"]
+__all__ = ["ReconstructionSettings", "MeshReconstructor", "network_images", "reconstruction_loss",
+           "batched_smoothness", "train_step", "train_reconstructor", "retrieve", "shape_scores",
+           "evaluate_reconstruction", "save_reconstructor", "load_reconstructor", "load_pretrained_reconstructor",
+           "PRETRAINED"]
 
 PRETRAINED = Path(__file__).parents[1] / "data" / "reconstructor.pt"
 
@@ -99,16 +100,36 @@ class MeshReconstructor(torch.nn.Module):
             for head in (self.log_scale, self.translation):
                 head.weight.zero_(), head.bias.zero_()
 
-    def forward(self, images: torch.Tensor) -> torch.Tensor:
-        """(B, V, 3) predicted vertices (world space) from images (B, H, W, 3) in [0, 1], H = W = size."""
-        if images.ndim != 4 or images.shape[1:] != (self.settings.size, self.settings.size, 3):
-            raise ValueError(f"images must be (B, {self.settings.size}, {self.settings.size}, 3), got shape "
-                             f"{tuple(images.shape)}")
+    def forward(self, images) -> torch.Tensor:
+        """(B, V, 3) predicted vertices (world space) from images (B, H, W, 3) in [0, 1], H = W = size: a tensor or
+        numpy array of any float dtype (run in the network's), or uint8 (0-255, divided by 255)."""
+        images = network_images(images, self.settings.size, self.template.dtype)
         B = images.shape[0]
         code = self.encoder(images.permute(0, 3, 1, 2))               # (B, code) from (B, 3, H, W)
         offsets = self.offsets(code).view(B, -1, 3)                   # (B, V, 3)
         scale = torch.exp(self.log_scale(code))[:, None]              # (B, 1, 3) per axis, positive
         return (self.template + offsets) * scale + self.translation(code)[:, None]
+
+
+def network_images(images, size: int, dtype: torch.dtype, name: str = "images") -> torch.Tensor:
+    """``images`` as the networks read them: (B, size, size, 3) of ``dtype``, colours in [0, 1]. Accepts a tensor
+    or numpy array of any real dtype (uint8: 0-255, divided by 255). Raises ValueError naming what is wrong: the
+    shape, NaN or inf, or values outside [0, 1] (a network fed 1e30 would answer with vertices at 1e27)."""
+    integer_255 = (isinstance(images, torch.Tensor) and images.dtype == torch.uint8) or (
+        getattr(images, "dtype", None) is not None and str(getattr(images, "dtype")) == "uint8")
+    images = as_tensor(images, name=name)
+    if integer_255:
+        images = images / 255.0
+    if images.ndim != 4 or images.shape[1:] != (size, size, 3):
+        raise ValueError(f"{name} must be (B, {size}, {size}, 3), got shape {tuple(images.shape)}")
+    if images.shape[0] == 0:
+        raise ValueError(f"{name} is empty (B = 0)")
+    _check_finite(images, name)
+    low, high = float(images.min()), float(images.max())
+    if low < -1e-6 or high > 1 + 1e-6:
+        raise ValueError(f"{name} must hold colours in [0, 1] (uint8 images 0-255 are divided by 255), got values "
+                         f"from {low:.3g} to {high:.3g}")
+    return images.to(dtype)
 
 
 def image_encoder(size: int, code: int) -> torch.nn.Sequential:

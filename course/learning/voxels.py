@@ -32,7 +32,7 @@ import torch.nn.functional as F
 from ..inverse.carve import surface_nets
 from ..inverse.losses import silhouette_iou_loss
 from ..tensors import _check_count, _check_real
-from .reconstruction import _per_shape_cameras, image_encoder, training_batches
+from .reconstruction import _per_shape_cameras, image_encoder, network_images, training_batches
 
 __all__ = ["VoxelSettings", "VoxelReconstructor", "project_occupancy", "voxel_loss", "train_voxel_reconstructor",
            "voxel_mesh", "save_voxel_reconstructor", "load_voxel_reconstructor", "load_pretrained_voxel_reconstructor"]
@@ -84,11 +84,10 @@ class VoxelReconstructor(torch.nn.Module):
             last = self.decoder[-1]
             last.weight.mul_(1e-2), last.bias.zero_()
 
-    def logits(self, images: torch.Tensor) -> torch.Tensor:
-        """(B, R, R, R) occupancy logits from images (B, H, W, 3) in [0, 1]."""
-        size = self.settings.size
-        if images.ndim != 4 or images.shape[1:] != (size, size, 3):
-            raise ValueError(f"images must be (B, {size}, {size}, 3), got shape {tuple(images.shape)}")
+    def logits(self, images) -> torch.Tensor:
+        """(B, R, R, R) occupancy logits from images (B, H, W, 3) in [0, 1] (``reconstruction.network_images``:
+        any float dtype, numpy too, uint8 divided by 255)."""
+        images = network_images(images, self.settings.size, self.template.dtype)
         code = self.encoder(images.permute(0, 3, 1, 2))
         n = self.first
         out = self.decoder(self.grid(code).view(-1, 16, n, n, n))[:, 0]
