@@ -106,7 +106,7 @@ def test_the_renderer_does_not_import_the_course_machinery():
 
 def test_every_command_names_a_module_with_a_cli():
     from course.__main__ import COMMANDS
-    assert set(COMMANDS) == {"render", "bench", "grade", "release", "workspace", "gradescope"}
+    assert set(COMMANDS) == {"lab", "site", "render", "bench", "grade", "release", "workspace", "gradescope"}
     for name, (module, _) in COMMANDS.items():
         assert module in module_names(), name
         assert callable(importlib.import_module(module).cli), name
