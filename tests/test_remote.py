@@ -327,3 +327,20 @@ def test_check_does_nothing_in_the_worker(monkeypatch, capsys):
     result = check("1.1", lambda w: 1 / 0)
     assert result.message == "checked by the grader" and capsys.readouterr().out == ""
     assert signal.getsignal(signal.SIGINT) is not None
+
+
+def test_a_grader_started_in_the_background_still_interrupts_cells():
+    """A shell without job control starts background commands with SIGINT ignored, and a child inherits that: the
+    worker takes the interrupt back, so a hanging cell is interrupted, not its worker ended (found when the suite
+    itself was started with `&`)."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)               # as `grade ... &` from a script
+    try:
+        w = Worker(Isolation())
+        w.start()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        assert w.run_cell("while True:\n    pass", 1) == ("timeout", "stopped after 1 s")
+        assert w.run_cell("x = 2", 5) == ("ok", "")
+    finally:
+        w.end()

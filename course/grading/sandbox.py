@@ -44,9 +44,7 @@ from .remote import Endpoint, RemoteFunction, decode
 
 __all__ = ["Isolation", "Worker", "GRACE", "START_TIMEOUT", "end_processes", "end_user_processes"]
 
-GRACE = 10.0                # seconds a cell has to stop after its interrupt before the worker is ended: a cell
-                            # answers within milliseconds on an idle machine, but 3 s was too short where every
-                            # core is busy (a TA grading with --jobs per core; the test suite on 2 cores)
+GRACE = 3.0                 # seconds a cell has to stop after its interrupt before the worker is ended
 START_TIMEOUT = 120.0       # seconds the worker may take to start (imports torch and the course)
 _BOOT = "from course.grading.worker import main; main()"
 _MARKER = "COURSE_GRADING_RUN"

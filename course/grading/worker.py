@@ -60,6 +60,11 @@ def main(argv: list[str] | None = None) -> None:
     rfd, wfd, limits = int(argv[0]), int(argv[1]), json.loads(argv[2]) if len(argv) > 2 else {}
     _limit_self(limits)
     os.environ["COURSE_GRADING_WORKER"] = "1"
+    # The grader stops a hanging cell with SIGINT (as Jupyter does). A process started in the background by a shell
+    # without job control (`python -m course grade ... &` in a script, a cron job) inherits SIGINT ignored, and
+    # Python then keeps it ignored: every hanging cell would cost its worker. Take the interrupt back.
+    import signal
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     from IPython.core.interactiveshell import InteractiveShell
 
