@@ -10,6 +10,7 @@ image). Screenshots of the notebook at 1024 and 1400 px wide, before and after, 
 Skipped, with the reason, where Playwright or Chromium is missing. Install with ``pip install playwright``
 (no ``playwright install``: the system's Chromium is used).
 """
+import contextlib
 import json
 import os
 import shutil
@@ -43,19 +44,14 @@ def _notebook(path: Path) -> None:
     path.write_text(json.dumps(nb), encoding="utf-8")
 
 
-@pytest.fixture
-def lab(tmp_path):
-    pytest.importorskip("playwright.sync_api", reason="Playwright is missing: pip install playwright")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"Chromium is missing at {CHROMIUM} (apt-get install chromium)")
-    _notebook(tmp_path / "explorers.ipynb")
+@contextlib.contextmanager
+def _jupyterlab(root: Path, env: dict, *extra: str):
+    """JupyterLab over ``root`` on a free port with a token, up within a minute; yields (url, token), then stops it."""
     port, token = _free_port(), "course-browser-test"
-    env = dict(os.environ, MPLBACKEND="module://matplotlib_inline.backend_inline")
     server = subprocess.Popen([sys.executable, "-m", "jupyter", "lab", "--no-browser", "--allow-root",
                                f"--port={port}", f"--ServerApp.token={token}", "--ServerApp.ip=127.0.0.1",
-                               f"--ServerApp.root_dir={tmp_path}", "--LabApp.news_url=",
-                               "--ServerApp.open_browser=False"],
-                              cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+                               f"--ServerApp.root_dir={root}", "--LabApp.news_url=", "--ServerApp.open_browser=False",
+                               *extra], cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
     try:
         for _ in range(120):                                                # up to a minute to start
@@ -66,13 +62,24 @@ def lab(tmp_path):
                 time.sleep(0.5)
         else:
             pytest.fail("JupyterLab did not start within a minute")
-        yield f"{url}/lab/tree/explorers.ipynb?token={token}"
+        yield url, token
     finally:
         server.terminate()
         try:
             server.wait(timeout=20)
         except subprocess.TimeoutExpired:
             server.kill()
+
+
+@pytest.fixture
+def lab(tmp_path):
+    pytest.importorskip("playwright.sync_api", reason="Playwright is missing: pip install playwright")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"Chromium is missing at {CHROMIUM} (apt-get install chromium)")
+    _notebook(tmp_path / "explorers.ipynb")
+    env = dict(os.environ, MPLBACKEND="module://matplotlib_inline.backend_inline")
+    with _jupyterlab(tmp_path, env) as (url, token):
+        yield f"{url}/lab/tree/explorers.ipynb?token={token}"
 
 
 @pytest.fixture
@@ -202,32 +209,10 @@ def course_lab(tmp_path):
     settings = tmp_path / "settings" / "@jupyterlab" / "docmanager-extension"
     settings.mkdir(parents=True)
     (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"autosave": True, "autosaveInterval": 1}))
-    port, token = _free_port(), "course-lab-test"
     env = course_lab_module.lab_environment()
     env["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
-    server = subprocess.Popen([sys.executable, "-m", "jupyter", "lab", "--no-browser", "--allow-root",
-                               f"--port={port}", f"--ServerApp.token={token}", "--ServerApp.ip=127.0.0.1",
-                               f"--ServerApp.root_dir={repo}", "--LabApp.news_url=",
-                               f"--LabApp.user_settings_dir={tmp_path / 'settings'}",
-                               "--ServerApp.open_browser=False"],
-                              cwd=repo, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}"
-    try:
-        for _ in range(120):
-            try:
-                urllib.request.urlopen(f"{url}/api/status?token={token}", timeout=1)
-                break
-            except OSError:
-                time.sleep(0.5)
-        else:
-            pytest.fail("JupyterLab did not start within a minute")
+    with _jupyterlab(repo, env, f"--LabApp.user_settings_dir={tmp_path / 'settings'}") as (url, token):
         yield repo, url, token
-    finally:
-        server.terminate()
-        try:
-            server.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            server.kill()
 
 
 def _run_all(page, url):

@@ -173,17 +173,25 @@ def table_rows(scores: dict, test, *, split: str = "test", baseline: str = "mesh
     groups = [(f, (test.labels == k).nonzero()[:, 0]) for k, f in enumerate(test.families)]
     for family, members in groups + [("mean", torch.arange(len(test)))]:
         row = {"split": split, "family": family, "n": int(members.numel())}
-        for method, metrics in scores.items():
-            for metric, values in metrics.items():
-                v = values[members]
-                row[f"{metric}_{method}"] = float(v.mean())
-                if method != baseline and baseline in scores:
-                    d = v - scores[baseline][metric][members]
-                    row[f"{metric}_{method}_diff"] = float(d.mean())
-                    row[f"{metric}_{method}_se"] = (float(d.std(unbiased=True)) / math.sqrt(d.numel())
-                                                    if d.numel() > 1 else float("nan"))
+        for metric in next(iter(scores.values()), {}):
+            row.update(_paired(scores, members, metric, baseline))
         rows.append(row)
     return rows
+
+
+def _paired(scores: dict, members: torch.Tensor, metric: str, baseline: str) -> dict:
+    """``{metric}_{method}``: each method's mean over ``members``; for the others also ``_diff`` and ``_se``, the
+    mean paired difference from ``baseline`` and its standard error (NaN for one shape)."""
+    out = {}
+    for method, metrics in scores.items():
+        v = metrics[metric][members]
+        out[f"{metric}_{method}"] = float(v.mean())
+        if method != baseline and baseline in scores:
+            d = v - scores[baseline][metric][members]
+            out[f"{metric}_{method}_diff"] = float(d.mean())
+            out[f"{metric}_{method}_se"] = (float(d.std(unbiased=True)) / math.sqrt(d.numel())
+                                            if d.numel() > 1 else float("nan"))
+    return out
 
 
 def novelty_rows(scores: dict, *, bins: int = 3, baseline: str = "mesh", metric: str = "iou") -> list:
@@ -202,15 +210,6 @@ def novelty_rows(scores: dict, *, bins: int = 3, baseline: str = "mesh", metric:
     for k, members in enumerate(order.tensor_split(bins)):
         if members.numel() == 0:
             continue
-        row = {"bin": k, "n": int(members.numel()), "oracle_low": float(near[members].min()),
-               "oracle_high": float(near[members].max())}
-        for method, metrics in scores.items():
-            v = metrics[metric][members]
-            row[f"{metric}_{method}"] = float(v.mean())
-            if method != baseline and baseline in scores:
-                d = v - scores[baseline][metric][members]
-                row[f"{metric}_{method}_diff"] = float(d.mean())
-                row[f"{metric}_{method}_se"] = (float(d.std(unbiased=True)) / math.sqrt(d.numel())
-                                                if d.numel() > 1 else float("nan"))
-        rows.append(row)
+        rows.append({"bin": k, "n": int(members.numel()), "oracle_low": float(near[members].min()),
+                     "oracle_high": float(near[members].max()), **_paired(scores, members, metric, baseline)})
     return rows
