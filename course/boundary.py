@@ -42,7 +42,7 @@ from .discontinuities import _intersecting_faces
 from .coverage import _region_chunks
 from .coverage_affine import _Field, polygon_centroids
 from .raster import _camera_space, _project, _screen_triangles
-from .scan import _plane, pixel_triangle_pairs
+from .scan import _plane, _plane_at, pixel_triangle_pairs
 from .soft import _screen_faces
 
 __all__ = ["boundary_points", "boundary_gradient"]
@@ -469,9 +469,8 @@ def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, fron
         mask = torch.zeros(H * W, dtype=torch.bool, device=s0.device)
         mask[pixel] = True
         pair_pix, tri = pixel_triangle_pairs(st.xy, W, H, mask)             # the faces of each pixel
-        q0, qx, qy = _plane(st)
-        centre = [(pair_pix % W).double() + 0.5, (pair_pix // W).double() + 0.5]
-        q = q0[tri] + qx[tri] * centre[0] + qy[tri] * centre[1]
+        plane = _plane(st)
+        q = _plane_at(plane, tri, (pair_pix % W).double() + 0.5, (pair_pix // W).double() + 0.5)
         near = -q if cam.orthographic else q                                # larger = nearer
         by_depth = torch.argsort(-near, stable=True)
         by_depth = by_depth[torch.argsort(pair_pix[by_depth], stable=True)]     # per pixel, nearest first
@@ -482,7 +481,7 @@ def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, fron
         d = b - a
         ends = [a[e] + s[:, None] * d[e] for s in (s0, s1)]                 # (N, 2) each
         own = [(planes[face[e]] * torch.cat([x, torch.ones_like(x[:, :1])], 1)).sum(1) for x in ends]
-        test = (st, q0, qx, qy, ends, own, -cam.far if cam.orthographic else 1 / cam.far, cam.orthographic)
+        test = (st, plane, ends, own, -cam.far if cam.orthographic else 1 / cam.far, cam.orthographic)
         lo = 0
         while lo <= int(rank.max()):                                        # the nearest faces first: a piece
             hi = lo + front if lo == 0 else 4 * lo                          # hidden by them is not tested again
@@ -498,7 +497,7 @@ def _hidden_pieces(mesh, cam, culled, planes, face, a, b, s0, s1, e, pixel, fron
 def _covered(pieces, pixel, pair_pix, tri, test, budget: int = 1 << 22):
     """The pieces (indices, (n,), in pixels (n,)) that one of the (pixel, triangle) pairs covers and is
     nearer than (``_hidden_pieces``), about ``budget`` tests at a time. Returns their indices."""
-    st, q0, qx, qy, ends, own, far, ortho = test
+    st, plane, ends, own, far, ortho = test
     xy = st.xy
     size = (xy.amax(1) - xy.amin(1)).amax(1)                                # (T,) for the margins
     order = torch.argsort(pixel)                                            # pieces grouped by pixel
@@ -517,7 +516,7 @@ def _covered(pieces, pixel, pair_pix, tri, test, budget: int = 1 << 22):
         t = tri[pair]                                                       # the face that may hide it
         for x, n_own in zip(ends, own):                                     # nearer at both ends, by a margin
             px, py = x[k, 0], x[k, 1]
-            q = q0[t] + qx[t] * px + qy[t] * py
+            q = _plane_at(plane, t, px, py)
             n = -q if ortho else q                                          # larger = nearer
             n_k = n_own[k]
             keep = ((n > n_k + 1e-9 * n_k.abs()) & (n >= far)).nonzero().squeeze(1)
@@ -593,7 +592,7 @@ def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1
             if finer == cells:
                 break
             cells = finer
-        q0, qx, qy = _plane(st)
+        plane = _plane(st)
         X = [st.xy[:, k, 0].contiguous() for k in range(3)]                 # corner columns: quick gathers
         Y = [st.xy[:, k, 1].contiguous() for k in range(3)]
         best_q = torch.full((idx.numel(),), -math.inf, dtype=torch.float64, device=pts.device)
@@ -617,7 +616,7 @@ def _visible_at(mesh, camera, pts, cull_backfaces: bool = False, budget: int = 1
                 inside &= (e > 0) | ((e == 0) & top_left)
             sel = inside.nonzero().squeeze(1)
             k, t, px, py = k[sel], t[sel], px[sel], py[sel]
-            q = q0.index_select(0, t) + qx.index_select(0, t) * px + qy.index_select(0, t) * py
+            q = _plane_at(plane, t, px, py)
             depth = q if camera.orthographic else 1 / q
             keep = (depth <= camera.far).nonzero().squeeze(1)
             # nearest = smallest depth, compared in float64 (the points lie 1e-6 px from edges, where two

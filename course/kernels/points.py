@@ -103,8 +103,8 @@ def visible_at(xy, q, face, px, py, width, height, orthographic, far, out):
             t = bucket[k]
             if not _covers(xy, t, px[i], py[i]):
                 continue
-            q0, qx, qy = _plane(xy, q, t)                                   # scan._plane, then _depth_at
-            qp = q0 + qx * px[i] + qy * py[i]
+            qa, xa, ya, qx, qy = _plane(xy, q, t)                           # scan._plane_at
+            qp = qa + qx * (px[i] - xa) + qy * (py[i] - ya)
             depth = qp if orthographic else 1 / qp
             if not depth <= far:
                 continue

@@ -54,8 +54,8 @@ def sample_faces(xy, q, face, pixels, offsets, per_pixel, width, height, orthogr
                 t = bucket[b]
                 if not _covers(xy, t, px, py):
                     continue
-                q0, qx, qy = _plane(xy, q, t)                               # scan._plane, as torch evaluates it
-                qp = q0 + qx * px + qy * py
+                qa, xa, ya, qx, qy = _plane(xy, q, t)                       # scan._plane_at, operation by operation
+                qp = qa + qx * (px - xa) + qy * (py - ya)
                 q32 = np.float32(qp)                                        # the far plane on float32 depth
                 d32 = q32 if orthographic else np.float32(1.0) / q32
                 if not d32 <= far32:

@@ -18,8 +18,8 @@ depths are compared directly, and every pixel where two depths come within ``NOT
 ``TIE_RTOL``) of each other is noted, with both faces, for ``scan._NearTies.resolve`` to decide exactly as
 the torch path does. (The loop compares q = 1/z rather than z, a division less per fragment: the order is
 the same wherever the two are not within rounding of each other, and there they are noted. Along a span q
-is stepped by qx from pixel to pixel, a few rounding errors from evaluating the plane at each centre, far
-below NOTE_RTOL: the noted pairs are decided with the plane evaluated exactly as in torch.) Without a
+is evaluated as torch evaluates it, operation by operation: once at the end where it is least, then that
+value plus qx times the whole number of pixels from it, so both paths hold the same q bit for bit.) Without a
 near-tie the nearer face is nearer by more than a rounding error, and both paths pick it.
 """
 from __future__ import annotations
@@ -78,13 +78,25 @@ def _span(x, y, row_y, width):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _plane(xy, q, t):
-    """The affine function q(px, py) = q0 + qx px + qy py of triangle t (``scan._plane``, operation by operation)."""
-    e1x, e1y = xy[t, 1, 0] - xy[t, 0, 0], xy[t, 1, 1] - xy[t, 0, 1]
-    e2x, e2y = xy[t, 2, 0] - xy[t, 0, 0], xy[t, 2, 1] - xy[t, 0, 1]
-    d1, d2 = q[t, 1] - q[t, 0], q[t, 2] - q[t, 0]
+    """Triangle t's affine q anchored at its corner of least |q| (``scan._plane``, operation by operation):
+    returns (qa, xa, ya, qx, qy), q(px, py) = qa + qx (px - xa) + qy (py - ya)."""
+    o, longest = 0, -1.0
+    for k in range(3):                                                      # the corner opposite the longest edge
+        sx = xy[t, (k + 2) % 3, 0] - xy[t, (k + 1) % 3, 0]
+        sy = xy[t, (k + 2) % 3, 1] - xy[t, (k + 1) % 3, 1]
+        if sx * sx + sy * sy > longest:
+            o, longest = k, sx * sx + sy * sy
+    k1, k2 = (o + 1) % 3, (o + 2) % 3
+    e1x, e1y = xy[t, k1, 0] - xy[t, o, 0], xy[t, k1, 1] - xy[t, o, 1]
+    e2x, e2y = xy[t, k2, 0] - xy[t, o, 0], xy[t, k2, 1] - xy[t, o, 1]
+    d1, d2 = q[t, k1] - q[t, o], q[t, k2] - q[t, o]
     det = e1x * e2y - e1y * e2x                                             # twice the area, > 0
     qx, qy = (d1 * e2y - d2 * e1y) / det, (d2 * e1x - d1 * e2x) / det
-    return q[t, 0] - qx * xy[t, 0, 0] - qy * xy[t, 0, 1], qx, qy
+    a = 0
+    for k in range(1, 3):                                                   # torch's argmin: the first least
+        if abs(q[t, k]) < abs(q[t, a]):
+            a = k
+    return q[t, a], xy[t, a, 0], xy[t, a, 1], qx, qy
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -112,15 +124,16 @@ def nearest_faces(xy, q, face, width, height, orthographic, far, check_far, face
         y_min, y_max = min(ys[0], ys[1], ys[2]), max(ys[0], ys[1], ys[2])
         r0 = int(max(math.ceil(y_min - 0.5), 0.0))                           # rows whose centres it reaches
         r1 = int(min(math.floor(y_max - 0.5), height - 1.0))
-        a, b, c = _plane(xy, q, t)
+        qa, xa, ya, b, c = _plane(xy, q, t)
         f = face[t]
         for row in range(r0, r1 + 1):
             row_y = row + 0.5
             first, last = _span(xs, ys, row_y, width)
-            qp = a + b * (int(first) + 0.5) + c * row_y                     # q at the span's first centre,
-            for col in range(int(first), int(last) + 1):                    # then one step of qx per pixel
-                q_here = qp
-                qp += b
+            col_a = first if b >= 0 else last                               # q at the span's end where it is
+            q_a = qa + b * (col_a + 0.5 - xa) + c * (row_y - ya)            # least, then |qx| per pixel from it
+            ia = int(col_a)                                                 # (scan._scan_convert's order)
+            for col in range(int(first), int(last) + 1):
+                q_here = q_a + b * np.float64(col - ia)
                 if check_far:
                     q32 = np.float32(q_here)
                     d32 = q32 if orthographic else np.float32(1.0) / q32
