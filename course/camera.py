@@ -17,7 +17,8 @@ import math
 
 import torch
 
-from .tensors import _check_count, _check_dtype, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
+from .tensors import (_check_count, _check_dtype, _check_finite, _check_flag, _check_real, _check_shape, _is_zero,
+                      as_tensor, unit, unit_scale)
 
 __all__ = [
     "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
@@ -111,11 +112,16 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)):
     for v, name in ((eye, "eye"), (target, "target"), (up, "up")):
         _check_shape(v, (3,), name)
     forward = target - eye
-    if forward.norm() <= 1e-12 * max(1.0, float(eye.detach().abs().max())):
-        raise ValueError("look_at: eye and target are the same point, the viewing direction is undefined")
-    z = forward / forward.norm()                                            # camera +z: forward
-    if float(up.detach().norm()) == 0:
+    # the same point when their difference is within a few roundings of the coordinates (at any scale: eye
+    # and target 3e-15 apart near the origin are a direction; 1e3 apart at 1e20 are rounding)
+    scale = max(float(eye.detach().abs().max()), float(target.detach().abs().max()))
+    if float(forward.detach().abs().max()) <= 4 * torch.finfo(eye.dtype).eps * scale:
+        raise ValueError("look_at: eye and target are the same point (within rounding of their coordinates), "
+                         "the viewing direction is undefined")
+    z = unit(forward)                                                       # camera +z: forward (any magnitude)
+    if _is_zero(up):
         raise ValueError("look_at: up must be a non-zero vector, got (0, 0, 0)")
+    up = unit_scale(up)                                                     # any magnitude, the same bits
     right = torch.linalg.cross(z, up)                                       # forward × up points right
     if right.norm() <= 1e-9 * up.norm():
         raise ValueError("look_at: up is parallel to the viewing direction; choose another up vector")
@@ -178,7 +184,8 @@ def _check_intrinsics(K: torch.Tensor, name: str = "K") -> None:
     if float(row.abs().max()) > K_ROW_TOLERANCE:
         raise ValueError(f"{name}'s last row must be (0, 0, 1), got {[round(float(v), 6) for v in k[2]]}: "
                          f"K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] in pixels")
-    if float(k[0, 0]) == 0 or float(k[1, 1]) == 0 or float(k[0, 0] * k[1, 1] - k[0, 1] * k[1, 0]) == 0:
+    a = k[:2, :2] / k[:2, :2].abs().max().clamp_min(torch.finfo(torch.float64).tiny)   # any scale: 1e-250 too
+    if float(k[0, 0]) == 0 or float(k[1, 1]) == 0 or float(a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) == 0:
         raise ValueError(f"{name} has a zero focal length (fx = K[0, 0] = {float(k[0, 0]):g}, "
                          f"fy = K[1, 1] = {float(k[1, 1]):g}): the camera would be degenerate")
 

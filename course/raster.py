@@ -38,6 +38,7 @@ gradient is recorded, stage 3 is the torch code, so autograd sees every step.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -492,8 +493,9 @@ def _kernel_face_table(face_map, verts, faces, camera):
     R = camera.R.detach().to(dtype)
     coef = torch.empty(n, 9, dtype=dtype)
     z = torch.empty(n, 3, dtype=dtype)
+    scale = torch.tensor([_surface_scale(used, verts, faces, camera)], dtype=dtype)   # as _face_table
     arrays = (used, verts.detach().to(dtype), faces, camera.R.detach().double(), camera.t.detach().double(), R,
-              torch.linalg.inv(K).T, (1 - K[2, 2]).reshape(1))
+              torch.linalg.inv(K).T, (1 - K[2, 2]).reshape(1), scale)
     face_table(*(x.contiguous().numpy() for x in arrays), bool(camera.orthographic), coef.numpy(), z.numpy())
     return fm, row, coef, z
 
@@ -525,6 +527,25 @@ def _surface_at(face, x, y, verts, faces, camera):
     return bary, depth
 
 
+def _surface_scale(used, verts, faces, camera) -> float:
+    """A power of two that brings the camera-space corners of the faces ``used`` (None: all) near unit size, or
+    1.0 when they already lie within 2^±32. ``_face_table`` multiplies the corners by it before its cross
+    products, so that float32 scenes at 1e20 (products ~1e40 > 3.4e38: NaN barycentrics) and float64 ones beyond
+    1e154 neither overflow nor underflow; a power of two scales every product exactly, so the barycentrics are
+    the same bits as an unscaled computation wherever that one does not overflow. (An orthographic camera's rays
+    start at pixel positions in world units: ``_face_table`` scales their pairing with the edges once more.)"""
+    if faces.shape[0] == 0:
+        return 1.0
+    with torch.no_grad():
+        corners = verts.detach().double()[faces if used is None else faces.index_select(0, used)].reshape(-1, 3)
+        if corners.numel() == 0:
+            return 1.0
+        m = float((_mat3(camera.R.detach().double(), corners) + camera.t.detach().double()).abs().max())
+    if not 0 < m < math.inf or 2.0 ** -32 <= m <= 2.0 ** 32:
+        return 1.0
+    return 2.0 ** -math.frexp(m)[1]
+
+
 def _face_table(used, verts, faces, camera):
     """Per face (``used`` (U,) ids, or None: every face), the coefficients of its three affine functions of
     the pixel's offset to the principal point, coef (U, 9) = (A1 A2 AΣ, B1 B2 BΣ, C1 C2 CΣ) with
@@ -536,11 +557,17 @@ def _face_table(used, verts, faces, camera):
     v0 = (_mat3(R.double(), v_world[:, 0].double()) + t.double()).to(dtype)   # (U, 3)
     e1 = _mat3(R, v_world[:, 1] - v_world[:, 0])                            # (U, 3) edges, rotated only
     e2 = _mat3(R, v_world[:, 2] - v_world[:, 0])
+    s = _surface_scale(used, verts, faces, camera)                          # 1.0 unless far from unit size
+    zs = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)                     # (U, 3) z0, e1_z, e2_z, unscaled
+    if s != 1.0:
+        v0, e1, e2 = v0 * s, e1 * s, e2 * s                                 # exact: a power of two
     if camera.orthographic:                                                 # d = +z: only z of each cross
         zero = torch.zeros_like(e1[:, 0])
         c = torch.stack([torch.stack([e2[:, 1], -e2[:, 0], _cross(e2, v0)[:, 2]], -1),
                          torch.stack([-e1[:, 1], e1[:, 0], _cross(v0, e1)[:, 2]], -1),
                          torch.stack([zero, zero, _cross(e1, e2)[:, 2]], -1)], 1)
+        if s != 1.0:                                                        # the ray origins' part: scaled too
+            c = c * torch.tensor([s, s, 1.0], dtype=c.dtype, device=c.device)
     else:                                                                   # T = -v0
         c = torch.stack([_cross(e2, v0), _cross(v0, e1), _cross(e1, e2)], 1)
     # w_k = c_k · d with d = K⁻¹ p = K⁻¹ q + e3, q = p - K e3 = (x - cx, y - cy, 1 - K22): the offset to the
@@ -548,7 +575,7 @@ def _face_table(used, verts, faces, camera):
     rows = _mat3(torch.linalg.inv(K).T, c)                                  # (U, 3, 3): c_k K⁻¹
     const = rows[..., 2] * (1 - K[2, 2]) + c[..., 2]                        # (U, 3)
     coef = torch.cat([rows[..., 0], rows[..., 1], const], 1)                # (U, 9)
-    return coef, torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)             # (U, 3) z0, e1_z, e2_z
+    return coef, zs
 
 
 # --------------------------------------------------------------------------------------------- public API

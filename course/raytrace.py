@@ -24,8 +24,10 @@ import torch
 from . import kernels
 from .bvh import BVH, Hits, morton_codes
 from .intersect import _slab, _watertight, intersect_triangles, moller_trumbore, ray_box  # noqa: F401 (re-exported)
-from .raster import Fragments, _check_inputs, _visible_surface
-from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
+from .camera import Camera
+from .mesh import Mesh
+from .raster import Fragments, _check_inputs, _surface_scale, _visible_surface
+from .tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor, unit
 
 __all__ = ["intersect_triangles", "moller_trumbore", "ray_box", "morton_codes", "BVH", "Hits", "raycast", "visible",
            "rectangle_light_samples", "disk_light_samples"]
@@ -78,20 +80,33 @@ def raycast(mesh, camera, *, bvh: BVH | None = None) -> Fragments:
     coplanarity tolerance is ~2e-9) may show different faces. The barycentrics and depth come from
     ``raster._visible_surface``, exactly as in ``rasterize``, so they are differentiable w.r.t. ``mesh.verts`` and
     K, R, t. Returns Fragments (H, W).
+
+    Scale: a scene whose camera-space coordinates lie beyond 2^±32 (1e150 or 1e-150 units: the ray-triangle
+    test's triple products would overflow or underflow float64) is traced scaled by a power of two, exactly,
+    with a BVH built for it (a ``bvh`` passed in is then not used); the faces found are those of the scene.
     """
     verts, faces = _check_inputs(mesh, camera)
     H, W = camera.height, camera.width
-    if bvh is None:
-        bvh = BVH(mesh)
-    elif not isinstance(bvh, BVH) or bvh.order.numel() != faces.shape[0]:
+    if bvh is not None and (not isinstance(bvh, BVH) or bvh.order.numel() != faces.shape[0]):
         raise ValueError("bvh must be a BVH built from this mesh")
-    o, d, dz = _camera_rays(camera)
+    s = _surface_scale(None, verts, faces, camera)
+    rays_of = camera
+    if s != 1.0:                                                            # the whole scene by a power of two
+        K = camera.K.detach().clone()
+        if camera.orthographic:
+            K[:2, :2] /= s                                                  # pixels per (scaled) world unit
+        rays_of = Camera(K, camera.R.detach(), camera.t.detach() * s, W, H, camera.near * s, camera.far * s,
+                         camera.orthographic)
+        bvh = BVH(Mesh(verts.detach() * s, faces))
+    elif bvh is None:
+        bvh = BVH(mesh)
+    o, d, dz = _camera_rays(rays_of)
     tiles = None if kernels.active(o, bvh.boxes) else _tile_order(H, W, o.device)   # 4 x 4 tiles: packets
     if tiles is not None:                                                   # (the compiled walk needs none)
         o, d, dz = o.index_select(0, tiles), d.index_select(0, tiles), dz.index_select(0, tiles)
     with torch.no_grad():                                                   # which face: not differentiable
-        hit = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(camera.near / dz).to(bvh.device),
-                            t_max=(camera.far / dz).to(bvh.device)).face_id.to(verts.device)
+        hit = bvh.intersect(o.to(bvh.device), d.to(bvh.device), t_min=(rays_of.near / dz).to(bvh.device),
+                            t_max=(rays_of.far / dz).to(bvh.device)).face_id.to(verts.device)
     face = hit if tiles is None else torch.empty_like(hit).index_put_((tiles.to(verts.device),), hit)
     bary, depth = _visible_surface(face, verts, faces, camera, H, W)       # as rasterize: same numbers
     return Fragments(face.view(H, W), bary, depth)
@@ -156,12 +171,12 @@ def visible(points, light, bvh: BVH, *, directional: bool = False, offset: float
         if n.shape != (N, 3):
             raise ValueError(f"normals must have shape (N, 3) with N = {N}, got {tuple(n.shape)}")
         _check_finite(n, "normals")
-        length = n.norm(dim=1, keepdim=True)
-        zero = (length == 0).repeat_interleave(S, 0)[:, 0]                  # no normal: t_min = offset instead
-        n = n / length.clamp_min(torch.finfo(dtype).tiny)
+        flat = (n == 0).all(1, keepdim=True)                                # no normal: t_min = offset instead
+        zero = flat.repeat_interleave(S, 0)[:, 0]
+        n = torch.where(flat, torch.zeros_like(n), unit(torch.where(flat, torch.ones_like(n), n)))   # any length
         o = o + offset * n.repeat_interleave(S, 0)
     if directional:
-        d = -L / L.norm(dim=1, keepdim=True).clamp_min(torch.finfo(dtype).tiny)
+        d = -unit(L)                                                        # any length: 1e-200 and 1e200 too
         t_lo, t_hi = torch.full((N * S,), offset, dtype=dtype, device=o.device), math.inf
     else:
         d = L - o                                                           # t = 1 at the light

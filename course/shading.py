@@ -37,7 +37,7 @@ from typing import Sequence, Union
 
 import torch
 
-from course.tensors import _check_finite, _check_real, as_tensor
+from course.tensors import _check_finite, _check_real, _is_zero, as_tensor, unit_scale
 from course.textures import mip_level, mip_pyramid, sample_texture, sample_texture_mip, uv_derivatives
 
 __all__ = [
@@ -74,9 +74,9 @@ class DirectionalLight:
     def incident(self, points_world: torch.Tensor):
         """points_world: (..., 3). Returns unit ``light_dir`` (..., 3) toward the light and radiance (..., 3)."""
         d = _light_vector(self.direction, "DirectionalLight.direction", points_world)
-        if float(d.detach().norm()) == 0:
+        if _is_zero(d):
             raise ValueError("DirectionalLight.direction must be a non-zero vector (the way the light travels)")
-        light_dir = normalize(-d).expand_as(points_world)
+        light_dir = normalize(-unit_scale(d)).expand_as(points_world)      # any magnitude (1e-200, 1e200)
         return light_dir, _radiance(self.color, self.intensity, points_world).expand_as(points_world)
 
 

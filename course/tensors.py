@@ -108,6 +108,29 @@ def _check_finite(x: torch.Tensor, name: str, *, allow_inf: bool = False) -> Non
         raise ValueError(f"{name} contains NaN" + ("" if allow_inf else " or inf"))
 
 
+def unit_scale(v: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """v times the power of two that brings its largest |component| along ``dim`` into [0.5, 1) (detached; 1 for
+    a zero vector). A power of two scales every later product, sum and square root exactly, so a direction
+    computed from the result has the very bits it would have from v, unless v's squares overflow (|v| beyond
+    ~1e154 in float64, ~1e19 in float32) or underflow, which they then no longer do."""
+    _, e = torch.frexp(v.detach().abs().amax(dim, keepdim=True))
+    return v * torch.ldexp(torch.ones_like(v.detach()), -e)
+
+
+def unit(v: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """``v / |v|`` along ``dim`` at any magnitude, bit for bit ``v / v.norm()`` wherever that one neither
+    overflows nor underflows (``unit_scale``): a direction of norm 1e160 gave inf (and every shadow test after
+    it failed), 1e-200 gave 0 ("a zero vector"). The gradient is that of v / |v|. A zero vector gives NaN:
+    callers refuse it first (``_is_zero``)."""
+    s = unit_scale(v, dim)
+    return s / s.norm(dim=dim, keepdim=True)
+
+
+def _is_zero(v: torch.Tensor) -> bool:
+    """Whether every component of v is 0 (not ``v.norm() == 0``, which is also true of 1e-200)."""
+    return not bool((v.detach() != 0).any())
+
+
 def _check_count(value, name: str, *, minimum: int = 1, hint: str = "") -> int:
     """``value`` as a Python int >= ``minimum``: an int, numpy integer or integer 0-d tensor, never a bool
     and never a float (not even 2.0). Raises a ValueError naming ``name`` otherwise (``hint``: a few words

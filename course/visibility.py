@@ -29,10 +29,13 @@ The methods (``method=``), each a function of this module:
   ``samples`` random points on the edges, chosen with probability proportional to their length. Unbiased;
   its variance falls as 1 / samples.
 * ``"reparameterization"``: change the variables of each pixel's integral so that the jumps stay put
-  (``course.warp``: a warp field continuous over the pixel, equal to the jumps' normal speed on them and 0 on
-  the pixel's border: Bangaru, Li and Durand's warped-area sampling), then differentiate under the integral
-  at ``samples`` stratified points per pixel. Unbiased (``warp="harmonic"``); ``warp="nearest"`` follows one
-  jump per point, as Loubet, Holzschuch and Jakob's estimator, and is biased where two share a pixel.
+  (``course.warp``: a warp field continuous over the pixel, equal to the jumps' normal speed on them and
+  with no normal part on the pixel's border), then differentiate under the integral at ``samples`` stratified
+  points per pixel. Unbiased: ``warp="bounded"`` (the default: each constraint met as strongly as the point is
+  near it, a least-squares warp whose divergence stays bounded) and ``warp="harmonic"`` (Bangaru, Li and
+  Durand's warped-area sampling in its simplest form: its divergence grows like 1/r where a jump meets the
+  pixel's border, and a run's error with it); ``warp="nearest"`` follows one jump per point, as Loubet,
+  Holzschuch and Jakob's estimator, and is biased where two share a pixel.
 * ``"nmr"`` and ``"soft"``: the gradients of lecture 08, of a different image (the hard one, or a blurred
   one): ``nmr.nmr_rasterize`` and ``soft.soft_rasterize``. They are here to be compared, not because they
   estimate this derivative.
@@ -382,7 +385,7 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
     ``scheme`` ("central" / "forward"), ``vertices`` (indices; other vertices' entries are NaN);
     reynolds: ``order`` (Gauss points per pixel piece of edge, 1); edge_sampling: ``samples`` (1000),
     ``generator`` or ``seed``; reparameterization: ``samples`` (per pixel, 16), ``kernel`` (pixels, 1.0; None:
-    no limit), ``warp`` ("harmonic" / "nearest"), ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma``
+    no limit), ``warp`` ("bounded" / "harmonic" / "nearest"), ``generator`` or ``seed``; soft: ``sigma`` (1e-4), ``gamma``
     (1e-4), ``threshold``; nmr: ``reach``.
     """
     if not isinstance(method, str) or method not in METHODS:
@@ -419,7 +422,7 @@ def image_gradient(mesh, camera, colors, weights, *, method, model="flat", backg
             g = boundary_gradient(prob, geo, samples=_count(options.pop("samples", 1000), "samples", None),
                                   generator=_generator(options))
         else:
-            kernel, warp = options.pop("kernel", 1.0), options.pop("warp", "harmonic")
+            kernel, warp = options.pop("kernel", 1.0), options.pop("warp", "bounded")
             if kernel is not None and (isinstance(kernel, bool) or not isinstance(kernel, (int, float))
                                        or not 0 < kernel < math.inf):
                 raise ValueError(f"kernel must be a positive number of pixels (or None: no limit), got {kernel!r}")

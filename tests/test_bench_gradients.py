@@ -55,13 +55,15 @@ def test_measure_scene_rows_and_errors_on_one_triangle():
     rows = gb.measure_scene(sc, "random", specs, repeat=1)
     by = {(r["family"], r["param"]): r for r in rows}
     assert [r["method"] for r in rows] == ["exact", "reynolds", "edge_sampling", "reparameterization",
-                                           "finite_differences", "finite_differences", "soft", "nmr"]
+                                           "reparameterization", "finite_differences", "finite_differences",
+                                           "soft", "nmr"]
     assert by[("exact", "")]["rel"] == 0 and by[("exact", "")]["x_exact"] == 1
     assert by[("reynolds", "order 1")]["rel"] < 1e-12                       # exact for flat colours
     assert by[("FD float64", "h=1e-06")]["rel"] < 1e-5
     assert by[("FD float32", "h=1e-03")]["dtype"] == "float32"
     assert 0 < by[("edge sampling", "200 smp")]["rel"] < 1                  # noisy but an estimate
     assert 0 < by[("reparameterization", "64 spp")]["rel"] < 1 and by[("reparameterization", "64 spp")]["cos"] > 0.5
+    assert 0 < by[("reparam. (harmonic)", "64 spp")]["rel"] < 2                # the 1/r warp beside it
     for r in rows:
         assert r["ms"] > 0 and math.isfinite(r["rel"]) and -1 <= r["cos"] <= 1 + 1e-12 and not r["abs"]
 

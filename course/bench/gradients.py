@@ -11,8 +11,8 @@ float32. The loss is ``L = Σ weights ⊙ image`` with two kinds of weights:
 * **random**: seeded standard normal weights, every pixel counts.
 
 Methods: ``exact`` (the reference, timed too), ``reynolds`` (orders 1 and 2), ``edge_sampling`` (several sample
-counts, seed 0), ``reparameterization`` (the harmonic warp, 16 and 256 samples per pixel that holds a jump,
-seed 0), ``finite_differences`` (central, several steps, float64 and float32), ``soft`` (several σ,
+counts, seed 0), ``reparameterization`` (the bounded warp, 16 and 256 samples per pixel that holds a jump,
+seed 0; the harmonic warp at 256 beside it), ``finite_differences`` (central, several steps, float64 and float32), ``soft`` (several σ,
 NDC units, γ = 1e-4) and ``nmr``. Soft and NMR differentiate a different image (a blurred one, the hard one),
 so their error measures how far their gradient is from the box-filtered image's, not an estimator's error.
 
@@ -201,6 +201,8 @@ def method_specs(steps=None, samples=SAMPLES, sigmas=SIGMAS, orders=ORDERS, warp
                    options=dict(samples=n, seed=0)) for n in samples]
     specs += [dict(method="reparameterization", family="reparameterization", param=f"{n:,} spp", dtype="float64",
                    options=dict(samples=n, seed=0)) for n in warp_samples]
+    specs += [dict(method="reparameterization", family="reparam. (harmonic)", param=f"{n:,} spp", dtype="float64",
+                   options=dict(samples=n, seed=0, warp="harmonic")) for n in warp_samples[-1:]]
     for dtype, hs in steps.items():
         name = str(dtype).replace("torch.", "")
         specs += [dict(method="finite_differences", family=f"FD {name}", param=f"h={h:.0e}", dtype=name,
@@ -521,8 +523,9 @@ rel L2: ‖g - g*‖ / ‖g*‖ over every entry, g* the exact gradient ("abs": 
   pose row: the largest over R, t, focal. cosine: of g and g* (pose: each parameter's block scaled to unit g*).
 × exact: the method's time (forward + gradient, one image_gradient call) over the exact gradient's on the same
   row; below 1 it is cheaper than differentiating the closed form, above 1 dearer.
-reparameterization: the harmonic warp (course.warp), "spp" samples per pixel that holds a jump; unbiased, its
-  variance gathers where a jump meets a pixel's border or two jumps moving differently meet.
+reparameterization: the bounded warp (course.warp), "spp" samples per pixel that holds a jump (every pixel with
+  vertex colours); unbiased, its divergence bounded. "harmonic": the inverse-distance warp, unbiased too, whose
+  divergence grows like 1/r where a jump meets a pixel's border or two jumps moving differently meet.
 FD: central differences of the closed-form image in the dtype shown (float32: round-off eps/h swamps it);
   "k of V vertices": a fixed seeded subset of the vertices the loss depends on, error over those entries.
 soft, NMR: gradients of a different image (blurred, or hard with NMR's approximation), not estimators of this one."""

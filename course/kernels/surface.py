@@ -22,10 +22,10 @@ def _mat3_row(M, i, x0, x1, x2):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def face_table(used, verts, faces, R64, t64, R, Minv, omk, orthographic, coef, z):
+def face_table(used, verts, faces, R64, t64, R, Minv, omk, scale, orthographic, coef, z):
     """``raster._face_table`` face by face. used (U,) face ids; verts (V, 3) in the output dtype; R64, t64 the
     camera's R and t in float64, R in the output dtype; Minv (3, 3) = K⁻¹ᵀ and omk (1,) = 1 - K22, both
-    formed in torch. Writes coef (U, 9) and z (U, 3), every operation in ``_face_table``'s order and dtype."""
+    formed in torch; scale (1,) ``raster._surface_scale``'s power of two. Writes coef (U, 9) and z (U, 3), every operation in ``_face_table``'s order and dtype."""
     v0 = np.empty(3, verts.dtype)                                           # float64, rounded to the dtype
     e1 = np.empty(3, verts.dtype)
     e2 = np.empty(3, verts.dtype)
@@ -39,6 +39,10 @@ def face_table(used, verts, faces, R64, t64, R, Minv, omk, orthographic, coef, z
         for i in range(3):                                                  # the edges, rotated only
             e1[i] = _mat3_row(R, i, verts[b, 0] - verts[a, 0], verts[b, 1] - verts[a, 1], verts[b, 2] - verts[a, 2])
             e2[i] = _mat3_row(R, i, verts[d, 0] - verts[a, 0], verts[d, 1] - verts[a, 1], verts[d, 2] - verts[a, 2])
+        z[u, 0], z[u, 1], z[u, 2] = v0[2], e1[2], e2[2]                     # unscaled
+        if scale[0] != 1:
+            for i in range(3):                                              # exact: a power of two
+                v0[i], e1[i], e2[i] = v0[i] * scale[0], e1[i] * scale[0], e2[i] * scale[0]
         # c_0 = e2 × v0, c_1 = v0 × e1, c_2 = e1 × e2 (raster._cross); orthographic: only their z, and the
         # x, y of d = +z's pairing
         z20, z01, z12 = e2[0] * v0[1] - e2[1] * v0[0], v0[0] * e1[1] - v0[1] * e1[0], e1[0] * e2[1] - e1[1] * e2[0]
@@ -46,6 +50,9 @@ def face_table(used, verts, faces, R64, t64, R, Minv, omk, orthographic, coef, z
             c[0, 0], c[0, 1], c[0, 2] = e2[1], -e2[0], z20
             c[1, 0], c[1, 1], c[1, 2] = -e1[1], e1[0], z01
             c[2, 0], c[2, 1], c[2, 2] = 0, 0, z12
+            if scale[0] != 1:                                               # raster._face_table: the origins' part
+                for k in range(3):
+                    c[k, 0], c[k, 1] = c[k, 0] * scale[0], c[k, 1] * scale[0]
         else:
             c[0, 0], c[0, 1], c[0, 2] = e2[1] * v0[2] - e2[2] * v0[1], e2[2] * v0[0] - e2[0] * v0[2], z20
             c[1, 0], c[1, 1], c[1, 2] = v0[1] * e1[2] - v0[2] * e1[1], v0[2] * e1[0] - v0[0] * e1[2], z01
@@ -55,7 +62,6 @@ def face_table(used, verts, faces, R64, t64, R, Minv, omk, orthographic, coef, z
             r1 = _mat3_row(Minv, 1, c[k, 0], c[k, 1], c[k, 2])
             r2 = _mat3_row(Minv, 2, c[k, 0], c[k, 1], c[k, 2])
             coef[u, k], coef[u, 3 + k], coef[u, 6 + k] = r0, r1, r2 * omk[0] + c[k, 2]
-        z[u, 0], z[u, 1], z[u, 2] = v0[2], e1[2], e2[2]
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -135,7 +141,7 @@ def warm_up():
         eye = np.eye(3)
         for ortho in (False, True):
             face_table(np.zeros(1, np.int64), np.eye(3, dtype=dt), np.array([[0, 1, 2]]), eye, np.ones(3),
-                       eye.astype(dt), eye.astype(dt), np.zeros(1, dt), ortho, np.empty((1, 9), dt),
+                       eye.astype(dt), eye.astype(dt), np.zeros(1, dt), np.ones(1, dt), ortho, np.empty((1, 9), dt),
                        np.empty((1, 3), dt))
     for dt in (np.float32, np.float64):
         pixel_surface(np.zeros(1, np.int64), np.zeros(1, np.int64), np.ones((1, 9), dt), np.ones((1, 3), dt),

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import torch
 
 from .gradients import _check_scene, shadow_image_gradient, shadowed_coverage
-from ..tensors import as_tensor
+from ..tensors import as_tensor, unit
 
 __all__ = ["LightFitSettings", "LightFit", "angle_between", "fit_light_direction"]
 
@@ -80,7 +80,7 @@ def fit_light_direction(mesh, camera, face_colors, target, init, *, ambient=0.3,
                          f"got {tuple(target.shape)}")
     if not torch.isfinite(target).all():
         raise ValueError("target contains NaN or inf")
-    light = (d.detach().double() / d.detach().double().norm()).clone().requires_grad_()
+    light = unit(d.detach().double()).clone().requires_grad_()
     opt = torch.optim.Adam([light], lr=settings.lr)
     fit = LightFit(light.detach().clone())
     steps = range(settings.steps)

@@ -50,8 +50,14 @@ vertex creases them, and a crease shadows one side only, concave or convex. An o
 (the cube standing on the floor): the floor's height under it. A vertex of a shadow outline exactly on an edge
 of its receiver (within ``SIDE_TOL``): the split snaps it onto the edge, and the derivative is the snapped
 arrangement's, not either side's (a symmetric scene can do this by accident; the test scenes avoid it). And
-a camera looking exactly along the light: an occluder's silhouette and its own shadow edge then lie on the
-same screen line, both boundaries claim the jump, and the boundary methods count it twice.
+a camera looking along the light: an occluder's silhouette and its own shadow edge then lie on the same
+screen line (exactly aligned: the shadow hides behind its occluder) or a sliver apart. The boundary methods
+ask the z-buffer which face shows a hair beside each edge (``boundary._side_offset``, ~1e-11 px): a sliver
+wider than that is resolved (an orthographic camera 1e-9 rad off a directional light, a perspective one 1e-9
+units from a point light 4 units from the scene: Reynolds equals exact to 1e-8 of central differences), a
+narrower one is stepped over and both edges claim the same jump. So ``"reynolds"`` and ``"edge_sampling"``
+refuse a camera within ``ALIGNED`` rad of the light's line of sight (an orthographic camera looking along a
+directional light, or a perspective camera at a point light); ``"exact"`` is right there too.
 
 Cost: the split loops over (receiver, occluder) pairs in Python, so it is for small scenes (tens to a few
 hundred faces); a pair is skipped when the occluder lies below the receiver's plane or a line separates them.
@@ -65,7 +71,7 @@ import torch
 from ..camera import Camera
 from ..coverage import exact_coverage
 from ..mesh import Mesh
-from ..tensors import as_tensor
+from ..tensors import _is_zero, as_tensor, unit
 from ..visibility import image_gradient
 
 __all__ = ["SCENES", "shadow_scene", "SplitMesh", "project_onto_plane", "split_by_shadows", "shadowed_coverage",
@@ -75,6 +81,7 @@ SHADOW_METHODS = ("exact", "finite_differences", "reynolds", "edge_sampling")
 GRAZING = 1e-9           # n̂_f · l at or below this: the face is turned away from the light (fully shadowed)
 SIDE_TOL = 1e-10         # of the scene's size: a vertex this close to a clipping line lies on it
 MERGE_TOL = 1e-8         # of the scene's size: split vertices this close are one vertex
+ALIGNED = 1e-10          # rad: a camera this close to the light's line of sight is refused by the boundary methods
 
 
 @dataclass(frozen=True)
@@ -185,7 +192,7 @@ def _check_scene(mesh, light, point: bool = False):
         if verts.numel() and bool(((d.detach() >= lo) & (d.detach() <= hi)).all()):
             raise ValueError(f"a point light must lie outside the scene's bounding box {lo.tolist()} - "
                              f"{hi.tolist()}, got {d.detach().tolist()} (a light inside the scene)")
-    elif float(d.detach().norm()) == 0:
+    elif _is_zero(d):
         raise ValueError("light must be a non-zero direction (the way the light travels), got a zero vector")
     return verts, faces, d
 
@@ -237,7 +244,9 @@ def _shadow_polygon(g_poly, v0, n_hat, light: _Light, cos, tol):
     counter-clockwise about n_hat, or None. g is clipped to the light's side of the plane (h >= 0, h the
     height above it) and, for a point light at height h_p, below the light (h <= h_p: nothing beyond the light
     blocks it), then moved onto the plane: along l by ``h / cos`` (directional, cos = n̂ · l), or along the
-    ray from the light, ``x' = p + (x - p) h_p / (h_p - h)`` (point, cos = h_p). None when nothing of g is
+    ray from the light, ``x' = x + (x - p) h / (h_p - h)`` (point, cos = h_p; the same point as
+    ``p + (x - p) h_p / (h_p - h)``, without the cancellation of p against -p when the light is far: that form
+    lost the shadow of a light 1e17 away). None when nothing of g is
     between the plane and the light, or D has no area (g edge-on to the light)."""
     h = (g_poly - v0) @ n_hat                                               # (3,) heights above the plane
     if float(h.detach().max()) <= tol:
@@ -251,7 +260,7 @@ def _shadow_polygon(g_poly, v0, n_hat, light: _Light, cos, tol):
     if light.position is None:
         D = above - (h / cos)[:, None] * light.to_light                     # (K, 3) on the plane
     else:
-        D = light.position + (above - light.position) * (cos / (cos - h))[:, None]
+        D = above + (above - light.position) * (h / (cos - h))[:, None]
     orient = float(_area_vector(D.detach()) @ n_hat.detach())
     if abs(orient) <= tol * tol:
         return None                                                         # edge-on to the light
@@ -276,11 +285,11 @@ def project_onto_plane(points, plane_point, plane_normal, light) -> torch.Tensor
             raise ValueError(f"{name} must have shape (3,), got {tuple(v.shape)}")
     if not all(bool(torch.isfinite(v).all()) for v in (x, p, n, l)):
         raise ValueError("points, plane_point, plane_normal and light must be finite (no NaN or inf)")
-    if float(n.detach().norm()) == 0 or float(l.detach().norm()) == 0:
+    if _is_zero(n) or _is_zero(l):
         raise ValueError("plane_normal and light must be non-zero vectors")
-    n_hat = n / n.norm()
+    n_hat = unit(n)
     cos = n_hat @ l
-    if abs(float(cos.detach())) <= GRAZING * float(l.detach().norm()):
+    if abs(float((n_hat @ unit(l)).detach())) <= GRAZING:
         raise ValueError("the light is parallel to the plane (n · l = 0): it casts no shadow on it")
     h = (x - p) @ n_hat                                                     # (N,) heights above the plane
     return x - (h / cos)[:, None] * l
@@ -439,7 +448,7 @@ def split_by_shadows(mesh, light, *, point: bool = False, view=None) -> SplitMes
     """
     verts, faces, d = _check_scene(mesh, light, point)
     v64 = verts.double()
-    lamp = _Light(None, d.double()) if point else _Light(-d.double() / d.double().norm(), None)
+    lamp = _Light(None, d.double()) if point else _Light(-unit(d.double()), None)
     v = v64[faces]                                                          # (F, 3, 3)
     extent = float((v64.detach().amax(0) - v64.detach().amin(0)).amax()) if v64.numel() else 1.0
     extent = extent if extent > 0 else 1.0
@@ -556,6 +565,7 @@ def shadow_image_gradient(mesh, camera, face_colors, light, weights, *, method, 
     if method == "finite_differences":
         return _fd_gradient(loss, params, names, options.pop("step", 1e-6), options.pop("vertices", None))
     # reynolds / edge_sampling: the boundary term of the split mesh, chained back through the split
+    _check_not_aligned(camera, d, point, verts)
     v_leaf = params["verts"].requires_grad_("verts" in names)
     l_leaf = params["light"].requires_grad_("light" in names)
     split = split_by_shadows(Mesh(v_leaf, faces), l_leaf, point=point, view=camera)
@@ -582,6 +592,25 @@ def shadow_image_gradient(mesh, camera, face_colors, light, weights, *, method, 
 
 
 # ------------------------------------------------------------------------------- the ray-traced reference
+
+def _check_not_aligned(camera, d, point, verts):
+    """Refuse the boundary methods where the camera looks along the light within ``ALIGNED`` rad (module
+    docstring): an orthographic camera and a directional light, or a perspective camera at a point light (the
+    angle: the distance between them over the nearest scene vertex's distance)."""
+    if bool(camera.orthographic) == bool(point):
+        return                                                              # aligned along one ray at most
+    if camera.orthographic:
+        forward = camera.R.detach().double()[2]
+        sine = float(torch.linalg.cross(forward, unit(d.detach().double()), dim=0).norm())
+    else:
+        eye = camera.eye.detach().double()
+        reach = float((verts.detach().double() - eye).norm(dim=1).min()) if verts.numel() else 1.0
+        sine = float((eye - d.detach().double()).norm()) / max(reach, 1e-300)
+    if sine < ALIGNED:
+        raise ValueError(f"the camera looks along the light ({sine:.1e} rad off, below ALIGNED = {ALIGNED:g}): an "
+                         f"occluder's silhouette and its own shadow's edge meet on screen, and the boundary methods "
+                         f"would count that jump twice; use method='exact' (autograd through the closed form)")
+
 
 def _fd_gradient(loss, params, names, step, vertices):
     """Central differences ``(L(π + h) - L(π - h)) / 2h``, one entry at a time, on the closed-form image.
@@ -613,8 +642,9 @@ def shadow_raytrace(mesh, camera, face_colors, light, ambient=0.3, background=(0
                     supersample: int = 8, *, point: bool = False) -> torch.Tensor:
     """The same image by ray tracing: ``supersample``² primary rays per pixel (a regular grid, ``raycast`` on
     a camera with ``supersample`` times the resolution), one shadow ray per hit (``raytrace.visible`` with the
-    faces' front normals, so a face turned away from the light is shadowed), box-averaged. (H, W, 3) float64.
-    The reference ``shadowed_coverage`` converges to as ``supersample`` grows."""
+    faces' front normals, so a face turned away from the light is shadowed; it starts 2^-40 of the scene's
+    largest coordinate above the surface, enough to clear rounding and too little to shift a grazing shadow),
+    box-averaged. (H, W, 3) float64. The reference ``shadowed_coverage`` converges to as ``supersample`` grows."""
     from ..raytrace import BVH, raycast, visible                             # the reference only
     verts, faces, d = _check_scene(mesh, light, point)
     s = int(supersample)
@@ -633,10 +663,15 @@ def shadow_raytrace(mesh, camera, face_colors, light, ambient=0.3, background=(0
     points = (frags.bary.reshape(-1, 3)[hit][:, :, None] * tri).sum(1)      # (N, 3) world
     normals = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=1)
     lamp = d.detach().double()
-    to_light = (lamp - tri[:, 0]) if point else -lamp / lamp.norm()         # (N, 3) or (3,)
+    to_light = (lamp - tri[:, 0]) if point else -unit(lamp)                 # (N, 3) or (3,)
     cos = ((normals / normals.norm(dim=1, keepdim=True)) * to_light).sum(1)
     facing = cos > GRAZING * (to_light.norm(dim=-1) if point else 1.0)
-    sees = visible(points, lamp, bvh, directional=not point, normals=normals) & facing
+    # the shadow ray starts above the surface by 2^-40 of the scene's largest coordinate: ~4000 roundings of a
+    # hit point's height, so it never meets its own face, and no more: an offset moves a shadow edge by
+    # offset / tan(elevation) and skips occluders closer than it (``visible``'s default, 1e-4 of the diagonal,
+    # left a floater 1e-5 above a floor lit 1e-4 rad above the horizon 0.25 off at any sample count)
+    offset = 2.0 ** -40 * max(float(m.verts.abs().max()), float(points.abs().max()) if points.numel() else 0.0)
+    sees = visible(points, lamp, bvh, directional=not point, normals=normals, offset=offset or None) & facing
     c = as_tensor(face_colors, dtype=torch.float64, name="face_colors")[fid[hit]]
     c = torch.where(sees[:, None], c, float(ambient) * c)
     image = as_tensor(background, dtype=torch.float64, name="background").expand(fid.shape[0], 3).clone()

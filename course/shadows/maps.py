@@ -47,7 +47,7 @@ import torch
 from ..camera import Camera, project_points
 from ..raster import rasterize
 from ..shading import DirectionalLight, PointLight
-from ..tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
+from ..tensors import _check_count, _check_finite, _check_flag, _check_real, _check_shape, _is_zero, as_tensor, unit
 
 __all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "light_space", "biased_depth",
            "biased_lit", "pcf", "shadow_factor", "area_light_samples", "area_shadow_factor"]
@@ -162,10 +162,9 @@ def _bounds(meshes_or_bounds):
 def _unit(v, name: str, like: torch.Tensor) -> torch.Tensor:
     v = as_tensor(v, dtype=like.dtype, device=like.device, name=name)
     _check_shape(v, (3,), name)
-    n = v.norm()
-    if float(n) <= 1e-12:
+    if _is_zero(v):
         raise ValueError(f"{name} must be a non-zero vector")
-    return v / n
+    return unit(v)
 
 
 def _up_for(forward: torch.Tensor) -> tuple:
