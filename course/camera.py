@@ -17,8 +17,7 @@ import math
 
 import torch
 
-from .tensors import (_check_count, _check_dtype, _check_finite, _check_flag, _check_real, _check_shape, _is_zero,
-                      as_tensor, unit, unit_scale)
+from .tensors import _check_count, _check_dtype, _check_finite, _check_flag, _check_real, _check_shape, as_tensor
 
 __all__ = [
     "axis_angle_to_matrix", "euler_to_matrix", "homogeneous", "transform_points",
@@ -118,10 +117,13 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)):
     if float(forward.detach().abs().max()) <= 4 * torch.finfo(eye.dtype).eps * scale:
         raise ValueError("look_at: eye and target are the same point (within rounding of their coordinates), "
                          "the viewing direction is undefined")
-    z = unit(forward)                                                       # camera +z: forward (any magnitude)
-    if _is_zero(up):
+    # a power of two first (exact: the same bits as without it), so that |v|² neither overflows nor underflows
+    pow2 = lambda v: v * 2.0 ** -math.frexp(float(v.detach().abs().max()))[1]   # noqa: E731
+    forward = pow2(forward)
+    z = forward / forward.norm()                                            # camera +z: forward
+    if not bool((up.detach() != 0).any()):
         raise ValueError("look_at: up must be a non-zero vector, got (0, 0, 0)")
-    up = unit_scale(up)                                                     # any magnitude, the same bits
+    up = pow2(up)
     right = torch.linalg.cross(z, up)                                       # forward × up points right
     if right.norm() <= 1e-9 * up.norm():
         raise ValueError("look_at: up is parallel to the viewing direction; choose another up vector")
