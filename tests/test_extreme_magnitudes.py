@@ -127,3 +127,17 @@ def test_a_light_camera_takes_a_direction_of_any_norm():
     for s in (1e-200, 1e200):
         b = light_camera(DirectionalLight(direction=tuple((light * s).tolist())), mesh, resolution=16)
         assert torch.allclose(a.R, b.R, atol=1e-15) and torch.allclose(a.t, b.t, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-200, 1e200])
+def test_look_at_is_differentiable_at_any_scale(scale):
+    """The power-of-two scaling inside look_at is a product autograd sees (``torch.ldexp`` would not be):
+    float64 gradcheck w.r.t. the eye and the target, at unit scale and far from it."""
+    eye = torch.tensor([0.3, 1.0, 2.0], dtype=torch.float64) * scale
+    target = torch.tensor([0.1, -0.2, 0.05], dtype=torch.float64) * scale
+
+    def rotation(e, t):
+        R, _ = look_at(e * scale, t * scale)
+        return R
+    e, t = (eye / scale).requires_grad_(), (target / scale).requires_grad_()
+    assert torch.autograd.gradcheck(rotation, (e, t))
