@@ -12,13 +12,17 @@ Lectures 06 (shadow maps) and 12 (differentiable shadows) use this folder; ``ren
   shadow map (lecture 12).
 * ``fit``: a directional light's direction recovered from one shadowed image (lecture 12).
 * ``art``: shadow art, a flat occluder deformed until its shadow draws a target outline (lecture 12).
+* ``area``: soft shadows of polygonal area lights in closed form: the form factor of a partly hidden light
+  (``light_form_factor``: the light clipped by the receiver's tangent plane and by the occluders' projections,
+  Lambert's contour formula), differentiable (lecture 14, in progress).
 
 Exported here: every public name of ``maps`` (so ``course.shadows.shadow_map`` reads as it always has), and the
-entry points of the other four; the rest from their modules (``from course.shadows.gradients import
+entry points of the other five; the rest from their modules (``from course.shadows.gradients import
 project_onto_plane``). Until 2026-11 these were the top-level modules ``course.shadows`` (now ``maps``),
 ``course.shadow_gradients``, ``course.prefiltered_shadows``, ``course.shadow_fit`` and ``course.shadow_art``;
 the old names still import, with a warning that names the new place (``course._moved``).
 """
+from .area import light_form_factor
 from .art import fit_shadow_art
 from .fit import fit_light_direction
 from .gradients import shadow_image_gradient, shadow_scene, shadowed_coverage, split_by_shadows
@@ -29,4 +33,4 @@ from .prefiltered import shadow_map_image
 __all__ = ["SpotLight", "ShadowMap", "CUBE_FACES", "light_camera", "shadow_map", "light_space", "biased_depth",
            "biased_lit", "pcf", "shadow_factor", "area_light_samples", "area_shadow_factor",
            "shadowed_coverage", "shadow_image_gradient", "split_by_shadows", "shadow_scene", "shadow_map_image",
-           "fit_light_direction", "fit_shadow_art"]
+           "fit_light_direction", "fit_shadow_art", "light_form_factor"]
