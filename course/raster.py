@@ -493,7 +493,7 @@ def _kernel_face_table(face_map, verts, faces, camera):
     R = camera.R.detach().to(dtype)
     coef = torch.empty(n, 9, dtype=dtype)
     z = torch.empty(n, 3, dtype=dtype)
-    scale = torch.tensor([_surface_scale(used, verts, faces, camera)], dtype=dtype)   # as _face_table
+    scale = torch.tensor([0.0], dtype=dtype)                                # the kernel fills it: _face_table's
     arrays = (used, verts.detach().to(dtype), faces, camera.R.detach().double(), camera.t.detach().double(), R,
               torch.linalg.inv(K).T, (1 - K[2, 2]).reshape(1), scale)
     face_table(*(x.contiguous().numpy() for x in arrays), bool(camera.orthographic), coef.numpy(), z.numpy())
@@ -527,13 +527,20 @@ def _surface_at(face, x, y, verts, faces, camera):
     return bary, depth
 
 
+def _scale_for(m: float) -> float:
+    """The power of two that brings a magnitude m (the largest |coordinate| of a computation) near unit size,
+    or 1.0 when m already lies within 2^±32 (or is 0 or not finite). A power of two scales every product, sum
+    and quotient exactly, so a computation on scaled numbers gives the same bits wherever the unscaled one
+    neither overflows nor underflows: float32 scenes at 1e20 (products ~1e40 > 3.4e38: NaN barycentrics) and
+    float64 ones beyond 1e154 then do neither."""
+    if not 0 < m < math.inf or 2.0 ** -32 <= m <= 2.0 ** 32:
+        return 1.0
+    return 2.0 ** -math.frexp(m)[1]
+
+
 def _surface_scale(used, verts, faces, camera) -> float:
-    """A power of two that brings the camera-space corners of the faces ``used`` (None: all) near unit size, or
-    1.0 when they already lie within 2^±32. ``_face_table`` multiplies the corners by it before its cross
-    products, so that float32 scenes at 1e20 (products ~1e40 > 3.4e38: NaN barycentrics) and float64 ones beyond
-    1e154 neither overflow nor underflow; a power of two scales every product exactly, so the barycentrics are
-    the same bits as an unscaled computation wherever that one does not overflow. (An orthographic camera's rays
-    start at pixel positions in world units: ``_face_table`` scales their pairing with the edges once more.)"""
+    """``_scale_for`` of the camera-space corners of the faces ``used`` (None: all): ``raytrace`` traces a scene
+    scaled by it. (``_face_table`` takes its own from the corner and edges it forms anyway.)"""
     if faces.shape[0] == 0:
         return 1.0
     with torch.no_grad():
@@ -541,9 +548,7 @@ def _surface_scale(used, verts, faces, camera) -> float:
         if corners.numel() == 0:
             return 1.0
         m = float((_mat3(camera.R.detach().double(), corners) + camera.t.detach().double()).abs().max())
-    if not 0 < m < math.inf or 2.0 ** -32 <= m <= 2.0 ** 32:
-        return 1.0
-    return 2.0 ** -math.frexp(m)[1]
+    return _scale_for(m)
 
 
 def _face_table(used, verts, faces, camera):
@@ -557,7 +562,12 @@ def _face_table(used, verts, faces, camera):
     v0 = (_mat3(R.double(), v_world[:, 0].double()) + t.double()).to(dtype)   # (U, 3)
     e1 = _mat3(R, v_world[:, 1] - v_world[:, 0])                            # (U, 3) edges, rotated only
     e2 = _mat3(R, v_world[:, 2] - v_world[:, 0])
-    s = _surface_scale(used, verts, faces, camera)                          # 1.0 unless far from unit size
+    # far from unit size (float32 at 1e20, float64 beyond 1e154) the cross products below overflow or underflow:
+    # the corner and edges are scaled by a power of two first (``_scale_for``), exactly; (an orthographic
+    # camera's rays start at pixel positions in world units: their pairing with the edges is scaled once more)
+    with torch.no_grad():
+        m = float(torch.stack([v0.abs().amax(), e1.abs().amax(), e2.abs().amax()]).amax()) if v0.numel() else 0.0
+    s = _scale_for(m)
     zs = torch.stack([v0[:, 2], e1[:, 2], e2[:, 2]], 1)                     # (U, 3) z0, e1_z, e2_z, unscaled
     if s != 1.0:
         v0, e1, e2 = v0 * s, e1 * s, e2 * s                                 # exact: a power of two

@@ -104,6 +104,18 @@ def _stratified(pixels, samples, generator):
     return (cell + torch.rand(cells.numel(), 2, dtype=torch.float64, generator=generator)) / k
 
 
+def _pairs(pixel, piece_pixel):
+    """The (point, piece) pairs of one pixel: point (M,) indices into the points, j (M,) into the pieces."""
+    order = torch.argsort(piece_pixel, stable=True)
+    keys = piece_pixel[order]
+    first = torch.searchsorted(keys, pixel)
+    count = torch.searchsorted(keys, pixel, right=True) - first
+    point = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), count)
+    offset = torch.arange(point.numel(), device=pixel.device) - torch.repeat_interleave(torch.cumsum(count, 0) - count,
+                                                                                          count)
+    return point, order[first[point] + offset]
+
+
 def warp_field(y, pixel, width, a, b, s0, s1, piece_pixel, velocity, divergence, kernel=1.0, warp="harmonic"):
     """The warp V at points y (N, 2) of pixels ``pixel`` (N,) and its divergence ∇·V, (N, 2) and (N,).
 
@@ -116,15 +128,7 @@ def warp_field(y, pixel, width, a, b, s0, s1, piece_pixel, velocity, divergence,
     wsum, dwsum = _sides(y - corner)
     if kernel is not None:
         wsum = wsum + kernel ** -2
-    # the pairs (point, piece) of one pixel
-    order = torch.argsort(piece_pixel, stable=True)
-    keys = piece_pixel[order]
-    first = torch.searchsorted(keys, pixel)
-    count = torch.searchsorted(keys, pixel, right=True) - first
-    point = torch.repeat_interleave(torch.arange(N, device=y.device), count)
-    offset = torch.arange(point.numel(), device=y.device) - torch.repeat_interleave(torch.cumsum(count, 0) - count,
-                                                                                      count)
-    j = order[first[point] + offset]
+    point, j = _pairs(pixel, piece_pixel)                                  # the (point, piece) pairs of a pixel
     ab = b[j] - a[j]
     length2 = (ab * ab).sum(1)
     t = ((y[point] - a[j]) * ab).sum(1) / length2
@@ -150,18 +154,6 @@ def warp_field(y, pixel, width, a, b, s0, s1, piece_pixel, velocity, divergence,
     V = y.new_zeros(N, 2).index_add(0, point, share[:, None] * v)
     div = y.new_zeros(N).index_add(0, point, (dshare * v).sum(1) + share * divergence(j, grad_s))
     return V, div
-
-
-def _pairs(pixel, piece_pixel):
-    """The (point, piece) pairs of one pixel: point (M,) indices into the points, j (M,) into the pieces."""
-    order = torch.argsort(piece_pixel, stable=True)
-    keys = piece_pixel[order]
-    first = torch.searchsorted(keys, pixel)
-    count = torch.searchsorted(keys, pixel, right=True) - first
-    point = torch.repeat_interleave(torch.arange(pixel.numel(), device=pixel.device), count)
-    offset = torch.arange(point.numel(), device=pixel.device) - torch.repeat_interleave(torch.cumsum(count, 0) - count,
-                                                                                          count)
-    return point, order[first[point] + offset]
 
 
 def bounded_warp_field(y, pixel, width, a, b, s0, s1, piece_pixel, velocity, kernel=1.0):

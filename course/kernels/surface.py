@@ -9,6 +9,8 @@ them). Wherever a gradient is recorded, ``_surface_at`` runs instead and autogra
 """
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -25,11 +27,27 @@ def _mat3_row(M, i, x0, x1, x2):
 def face_table(used, verts, faces, R64, t64, R, Minv, omk, scale, orthographic, coef, z):
     """``raster._face_table`` face by face. used (U,) face ids; verts (V, 3) in the output dtype; R64, t64 the
     camera's R and t in float64, R in the output dtype; Minv (3, 3) = K⁻¹ᵀ and omk (1,) = 1 - K22, both
-    formed in torch; scale (1,) ``raster._surface_scale``'s power of two. Writes coef (U, 9) and z (U, 3), every operation in ``_face_table``'s order and dtype."""
+    formed in torch; scale (1,) written here: ``raster._scale_for`` of the largest |v0|, |e1|, |e2| (a first pass,
+    as ``_face_table`` takes it). Writes coef (U, 9) and z (U, 3), every operation in ``_face_table``'s order and
+    dtype."""
     v0 = np.empty(3, verts.dtype)                                           # float64, rounded to the dtype
     e1 = np.empty(3, verts.dtype)
     e2 = np.empty(3, verts.dtype)
     c = np.empty((3, 3), verts.dtype)
+    m = 0.0
+    for u in range(used.shape[0]):                                          # the largest magnitude
+        f = used[u]
+        a, b, d = faces[f, 0], faces[f, 1], faces[f, 2]
+        for i in range(3):
+            v0[i] = _mat3_row(R64, i, np.float64(verts[a, 0]), np.float64(verts[a, 1]),
+                              np.float64(verts[a, 2])) + t64[i]
+            e1[i] = _mat3_row(R, i, verts[b, 0] - verts[a, 0], verts[b, 1] - verts[a, 1], verts[b, 2] - verts[a, 2])
+            e2[i] = _mat3_row(R, i, verts[d, 0] - verts[a, 0], verts[d, 1] - verts[a, 1], verts[d, 2] - verts[a, 2])
+            m = max(m, abs(np.float64(v0[i])), abs(np.float64(e1[i])), abs(np.float64(e2[i])))
+    s = 1.0                                                                 # raster._scale_for
+    if 0 < m < math.inf and not (2.0 ** -32 <= m <= 2.0 ** 32):
+        s = 2.0 ** -math.frexp(m)[1]
+    scale[0] = s
     for u in range(used.shape[0]):
         f = used[u]
         a, b, d = faces[f, 0], faces[f, 1], faces[f, 2]
