@@ -92,7 +92,7 @@ def polygon_form_factor(x, n, poly) -> torch.Tensor:
     return -(gamma * (c @ n) / safe).sum() / (2 * math.pi)
 
 
-def _occluder_triangles(occluders, like):
+def _occluder_triangles(occluders):
     if occluders is None:
         return None
     if not hasattr(occluders, "verts") or not hasattr(occluders, "faces"):
@@ -177,7 +177,7 @@ def light_form_factor(points, normals, light, occluders=None) -> torch.Tensor:
     if X.shape[0] and bool((Nrm.detach() == 0).all(1).any()):
         raise ValueError("normals contains a zero vector")
     L = check_light(light, X)
-    tris = _occluder_triangles(occluders, X)
+    tris = _occluder_triangles(occluders)
     out_dtype = torch.promote_types(X.dtype, L.dtype)
     if tris is not None:
         out_dtype = torch.promote_types(out_dtype, as_tensor(occluders.verts).dtype)
