@@ -269,3 +269,28 @@ def test_the_images_gradient_is_the_derivative():
         scale = max(float(fd6.abs().max()), 1e-3)
         assert float((fd5 - fd6).abs().max()) < 1e-4 * scale, (k, fd5, fd6)
         assert float((g - fd6).abs().max()) < 1e-4 * scale, (k, g, fd6)
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_a_point_gets_the_same_answer_alone_or_in_a_batch(name):
+    """The points are clipped together in padded batches (``area._visible_batch``): a point's form factor and
+    gradient do not depend on the others in its batch or the chunk size (a wall touching the receiver plane
+    leaves a corner at a point's own level in another point's unused slots: it must not leak a NaN)."""
+    from course.shadows import area
+    light, mesh = SCENES[name]
+    pts = torch.cat([POINTS, POINTS[:3] + torch.tensor([0.21, 0.0, -0.17], dtype=F64)])
+    nrm = UP.expand_as(pts) + 0.1 * torch.sin(torch.arange(24, dtype=F64)).view(8, 3)
+    leaf = pts.clone().requires_grad_()
+    together = light_form_factor(leaf, nrm, light, mesh)
+    grad, = torch.autograd.grad(together.sum(), leaf)
+    assert bool(torch.isfinite(grad).all())
+    for i in range(pts.shape[0]):
+        one = pts[i:i + 1].clone().requires_grad_()
+        alone = light_form_factor(one, nrm[i:i + 1], light, mesh)
+        g1, = torch.autograd.grad(alone.sum(), one)
+        assert float((alone[0] - together[i]).abs()) <= 1e-15
+        assert float((g1[0] - grad[i]).abs().max()) <= 1e-12
+    n64 = nrm / nrm.norm(dim=1, keepdim=True)
+    tris = mesh.verts[mesh.faces]
+    chunked = area._form_factors(pts, n64, light, tris, None, chunk=3)
+    assert float((chunked - together.detach()).abs().max()) <= 1e-15

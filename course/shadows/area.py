@@ -42,9 +42,9 @@ import torch
 
 from ..mesh import Mesh
 from ..tensors import _check_finite, as_tensor
-from .gradients import _area_vector, _clip, _subtract
+from .gradients import _area_vector
 
-__all__ = ["light_form_factor", "polygon_form_factor", "check_light", "area_light_image", "DUNAVANT5"]
+__all__ = ["light_form_factor", "light_pieces", "polygon_form_factor", "check_light", "area_light_image", "DUNAVANT5"]
 
 SIDE_TOL = 1e-12         # of the scene's size: a vertex this close to a clipping plane lies on it
 WIDEN = 1e-3             # the pyramid that clips the occluders is over the light widened by this fraction: an
@@ -109,51 +109,182 @@ def _occluder_triangles(occluders):
     return verts.double()[faces]                                            # (F, 3, 3)
 
 
-def _visible_pieces(x, n, L, n_L, tris, tol, skip=-1):
-    """The convex pieces of the light polygon L (K, 3) that x sees (module docstring, steps 1-2), each wound
-    counter-clockwise about n_L, or [] (x behind the light, or the light behind x's tangent plane)."""
-    d_x = (x - L[0]) @ n_L                                                  # x's height above the light's plane
-    if float(d_x.detach()) <= tol:
-        return []
-    front = _clip(L, (L - x) @ n, tol)                                      # in front of the receiver
-    if front.shape[0] < 3:
-        return []
-    pieces = [front]
-    if tris is None:
-        return pieces
+# ---------------------------------------------------------------- every receiving point at once
+#
+# Each point's light is clipped by its own planes, so the polygons differ in size from point to point. They are
+# kept in padded batches: ``P`` (B, M, 3), the vertices of B polygons in order, ``n`` (B,) how many of the M
+# slots each uses (the rest are ignored; fewer than 3 means empty). The clip below is Sutherland–Hodgman on all
+# B at once: every vertex on the kept side, then every crossing, written into 2M slots and packed to the front.
+
+def _clip_batch(P, n, s, tol):
+    """The part of each convex polygon of the batch (P (B, M, 3), counts n (B,)) where ``s >= 0``, s (B, M) the
+    signed distances of its vertices to the clipping plane. A vertex with |s| <= tol lies on the plane: kept,
+    never cut (a plane along an edge makes no sliver). Returns (P', n'), n' = 0 where fewer than 3 remain."""
+    B, M = s.shape
+    slot = torch.arange(M, device=P.device).expand(B, M)
+    used = slot < n[:, None]
+    nxt = torch.where(slot + 1 < n[:, None], slot + 1, torch.zeros_like(slot))   # the next vertex, cyclically
+    sd = s.detach()
+    side = torch.where(sd > tol, 1, torch.where(sd < -tol, -1, 0))
+    side_next = side.gather(1, nxt)
+    keep = used & (side >= 0)
+    cut = used & (side * side_next < 0)                                    # strictly across: cut the edge
+    s_next = s.gather(1, nxt)
+    t = s / torch.where(cut, s - s_next, torch.ones_like(s))
+    P_next = P.gather(1, nxt[..., None].expand(B, M, 3))
+    crossing = P + t[..., None] * (P_next - P)
+    candidates = torch.stack([P, crossing], 2).reshape(B, 2 * M, 3)         # vertex i, then edge i's crossing
+    mask = torch.stack([keep, cut], 2).reshape(B, 2 * M)
+    order = torch.sort((~mask).to(torch.int8), dim=1, stable=True).indices # the kept slots first, in order
+    count = mask.sum(1)
+    width = max(int(count.max()) if B else 0, 1)
+    order = order[:, :width]
+    packed = candidates.gather(1, order[..., None].expand(B, width, 3))
+    return packed, torch.where(count >= 3, count, torch.zeros_like(count))
+
+
+def _area_batch(P, n):
+    """(B, 3) the area vectors of the batch's polygons (half the sum of the cross products of their edges)."""
+    B, M, _ = P.shape
+    slot = torch.arange(M, device=P.device).expand(B, M)
+    nxt = torch.where(slot + 1 < n[:, None], slot + 1, torch.zeros_like(slot))
+    c = torch.linalg.cross(P, P.gather(1, nxt[..., None].expand(B, M, 3)), dim=2)
+    return 0.5 * torch.where((slot < n[:, None])[..., None], c, torch.zeros_like(c)).sum(1)
+
+
+def _reverse_batch(P, n, flip):
+    """The polygons with ``flip`` (B,) True in the opposite order (their first ``n`` slots reversed)."""
+    B, M, _ = P.shape
+    slot = torch.arange(M, device=P.device).expand(B, M)
+    back = torch.where(slot < n[:, None], n[:, None] - 1 - slot, slot)
+    index = torch.where(flip[:, None], back, slot)
+    return P.gather(1, index[..., None].expand(B, M, 3))
+
+
+def _lambert_batch(P, n, x, normal):
+    """(B,) Lambert's formula (``polygon_form_factor``) for each polygon of the batch seen from x (B, 3) with
+    unit normal (B, 3); 0 for an empty one."""
+    B, M, _ = P.shape
+    slot = torch.arange(M, device=P.device).expand(B, M)
+    nxt = torch.where(slot + 1 < n[:, None], slot + 1, torch.zeros_like(slot))
+    r = P - x[:, None, :]
+    r_next = r.gather(1, nxt[..., None].expand(B, M, 3))
+    c = torch.linalg.cross(r, r_next, dim=2)
+    length = c.norm(dim=2)
+    gamma = torch.atan2(length, (r * r_next).sum(2))
+    counted = (slot < n[:, None]) & (length > 0)                            # an edge in line with x: no angle
+    safe = torch.where(counted, length, torch.ones_like(length))
+    term = torch.where(counted, gamma * (c * normal[:, None, :]).sum(2) / safe, torch.zeros_like(length))
+    return -term.sum(1) / (2 * math.pi)
+
+
+def _subtract_batch(P, n, D, m, n_hat, tol):
+    """Each convex polygon of the batch (P, n) minus the convex polygon D (B, Md, 3) with counts m (B,) in the
+    same plane of unit normal ``n_hat``, D wound counter-clockwise about it: the parts outside D, as up to
+    Md disjoint convex pieces per polygon (``gradients._subtract``, for a batch): walking D's edges, the part
+    beyond each edge is cut off as a piece and the rest goes on. Rows with m < 3 are returned whole.
+    Returns (pieces (B', M', 3), counts (B',), row (B',) the input row each piece came from)."""
+    B, Md, _ = D.shape
+    rows = torch.arange(B, device=P.device)
+    active = m >= 3
+    out_P, out_n, out_row = [], [], []
+    rest, rest_n = P, torch.where(active, n, torch.zeros_like(n))
+    out_P.append(P), out_n.append(torch.where(active, torch.zeros_like(n), n)), out_row.append(rows)   # untouched
+    for k in range(Md):
+        k_next = torch.where(k + 1 < m, k + 1, torch.zeros_like(m))
+        a = D[:, k]
+        b = D.gather(1, k_next[:, None, None].expand(B, 1, 3))[:, 0]
+        inward = torch.linalg.cross(n_hat.expand(B, 3), b - a, dim=1)
+        length = inward.norm(dim=1, keepdim=True)
+        edge = (k < m) & (length[:, 0] > 0)
+        inward = inward / length.clamp_min(1e-300)
+        s = ((rest - a[:, None, :]) * inward[:, None, :]).sum(2)            # (B, M) into D is positive
+        used = torch.arange(rest.shape[1], device=P.device)[None] < rest_n[:, None]
+        sd = s.detach()
+        inside_all = ((sd >= -tol) | ~used).all(1)
+        outside_all = ((sd <= tol) | ~used).all(1)
+        part, part_n = _clip_batch(rest, rest_n, -s, tol)
+        part_n = torch.where(edge & ~inside_all, part_n, torch.zeros_like(part_n))
+        out_P.append(part), out_n.append(part_n), out_row.append(rows)
+        cut, cut_n = _clip_batch(rest, rest_n, s, tol)
+        keep_rest = ~edge | inside_all
+        width = max(cut.shape[1], rest.shape[1])
+        rest = torch.where(keep_rest[:, None, None], _pad(rest, width), _pad(cut, width))
+        rest_n = torch.where(keep_rest, rest_n, torch.where(outside_all, torch.zeros_like(cut_n), cut_n))
+    width = max(p.shape[1] for p in out_P)
+    pieces, counts, row = torch.cat([_pad(p, width) for p in out_P]), torch.cat(out_n), torch.cat(out_row)
+    keep = (counts >= 3).nonzero().squeeze(1)
+    return pieces[keep], counts[keep], row[keep]
+
+
+def _pad(P, width):
+    """The batch P (B, M, 3) with M padded (by copies of its last slot) or cut to ``width`` slots."""
+    if P.shape[1] >= width:
+        return P[:, :width]
+    return torch.cat([P, P[:, -1:].expand(P.shape[0], width - P.shape[1], 3)], 1)
+
+
+def _visible_batch(X, Nrm, L, n_L, tris, tol, own=None):
+    """The convex pieces of the light L (K, 3) that each point X (N, 3) with unit normal Nrm (N, 3) sees (module
+    docstring, steps 1-2), skipping triangle own[i] (its own face) for point i when given: (pieces (B, M, 3),
+    counts (B,), owner (B,) the point each piece belongs to), every piece wound counter-clockwise about n_L."""
+    N, K = X.shape[0], L.shape[0]
+    d_x = (X - L[0]) @ n_L                                                  # the points' heights above the light
+    start = L.expand(N, K, 3)
+    count = torch.full((N,), K, dtype=torch.long, device=X.device)
+    count = torch.where(d_x.detach() > tol, count, torch.zeros_like(count)) # behind the light: nothing
+    P, count = _clip_batch(start, count, ((start - X[:, None]) * Nrm[:, None]).sum(2), tol)   # in front of x
+    owner = torch.arange(N, device=X.device)
+    keep = (count >= 3).nonzero().squeeze(1)
+    P, count, owner = P[keep], count[keep], owner[keep]
+    if tris is None or P.shape[0] == 0:
+        return P, count, owner
     centre = L.detach().mean(0)
     wide = centre + (L - centre) * (1 + WIDEN)                              # the light a little wider: an
-    walls = []                                                              # occluder's projection then reaches
-    for i in range(L.shape[0]):                                             # past the light's edges rather than
-        m = torch.linalg.cross(wide[i] - x, wide[(i + 1) % L.shape[0]] - x, dim=0)   # along them
-        walls.append(m if float(m.detach() @ (centre - x.detach())) > 0 else -m)
-    for index, tri in enumerate(tris):
-        if not pieces:
+    walls = torch.linalg.cross(wide[None] - X[:, None], wide.roll(-1, 0)[None] - X[:, None], dim=2)   # occluder's
+    inward = ((walls.detach() * (centre - X.detach())[:, None]).sum(2) > 0)  # projection then reaches past the
+    walls = torch.where(inward[..., None], walls, -walls)                   # light's edges rather than along them
+    for index in range(tris.shape[0]):
+        if P.shape[0] == 0:
             break
-        if index == skip:
-            continue                                                        # the receiver's own face
+        tri = tris[index].expand(N, 3, 3)
         d = (tri - L[0]) @ n_L                                              # the corners' heights above the light
-        part = _clip(tri, d, tol)                                           # not beyond the light's plane
-        if part.shape[0] >= 3:
-            part = _clip(part, d_x - (part - L[0]) @ n_L, tol)              # nor behind x's level
-        for m in walls:                                                     # inside the pyramid from x over
-            if part.shape[0] < 3:                                           # the light: its projection lies in
-                break                                                       # the light, never far away
-            part = _clip(part, (part - x) @ m, tol)
-        if part.shape[0] < 3:
+        D, m = _clip_batch(tri, torch.full((N,), 3, device=X.device), d, tol)   # not beyond the light's plane
+        h = (D - L[0]) @ n_L
+        D, m = _clip_batch(D, m, d_x[:, None] - h, tol)                      # nor behind x's level
+        for w in range(K):                                                  # inside the pyramid from x over
+            D, m = _clip_batch(D, m, ((D - X[:, None]) * walls[:, w][:, None]).sum(2), tol)   # the light
+        if own is not None:
+            m = torch.where(own == index, torch.zeros_like(m), m)           # the receiver's own face
+        if not bool((m >= 3).any()):
             continue
-        h = (part - L[0]) @ n_L
-        q = x + (part - x) * (d_x / (d_x - h))[:, None]                     # projected from x onto the plane
-        orient = float(_area_vector(q.detach()) @ n_L.detach())
-        if abs(orient) <= tol * tol:
-            continue                                                        # seen edge-on: hides no area
-        D = q if orient > 0 else q.flip(0)
-        kept = []
-        for piece in pieces:
-            outside, _ = _subtract(piece, D, n_L, tol)
-            kept += outside
-        pieces = kept
-    return pieces
+        h = (D - L[0]) @ n_L
+        used = torch.arange(D.shape[1], device=X.device)[None] < m[:, None]   # (unused slots: anything finite)
+        scale = d_x[:, None] / torch.where(used, d_x[:, None] - h, torch.ones_like(h))
+        Q = X[:, None] + (D - X[:, None]) * scale[..., None]                # projected from x onto the plane
+        orient = (_area_batch(Q.detach(), m) * n_L.detach()).sum(1)
+        m = torch.where(orient.abs() > tol * tol, m, torch.zeros_like(m))   # seen edge-on: hides no area
+        Q = _reverse_batch(Q, m, orient < 0)                                # counter-clockwise about n_L
+        pieces, counts, row = _subtract_batch(P, count, Q[owner], m[owner], n_L, tol)
+        P, count, owner = pieces, counts, owner[row]
+    return P, count, owner
+
+
+def light_pieces(point, normal, light, occluders=None) -> list:
+    """The convex pieces of ``light`` that ``point`` (3,) with ``normal`` (3,) sees past ``occluders`` (module
+    docstring, steps 1-2): a list of (M, 3) polygons in the light's plane, wound as the light. What
+    ``light_form_factor`` integrates; lecture 14 draws them."""
+    X = as_tensor(point, name="point").reshape(1, 3).double()
+    Nrm = as_tensor(normal, name="normal").reshape(1, 3).double()
+    _check_finite(X, "point")
+    _check_finite(Nrm, "normal")
+    L = check_light(light).double()
+    tris = _occluder_triangles(occluders)
+    area = _area_vector(L)
+    n_L = area / area.norm()
+    tol = SIDE_TOL * _scale(X, L, tris)
+    P, n, _ = _visible_batch(X, Nrm / Nrm.norm(), L, n_L, tris, tol)
+    return [P[i, :int(n[i])] for i in range(P.shape[0])]
 
 
 def light_form_factor(points, normals, light, occluders=None) -> torch.Tensor:
@@ -186,24 +317,25 @@ def light_form_factor(points, normals, light, occluders=None) -> torch.Tensor:
     return _form_factors(X64, N64, L64, tris, None).clamp(0.0, 1.0).to(out_dtype)
 
 
-def _form_factors(X64, N64, L64, tris, own):
+def _scale(X64, L64, tris):
+    return float(torch.cat([X64.detach(), L64.detach()] + ([] if tris is None else [tris.detach().reshape(-1, 3)]))
+                 .abs().max().clamp_min(1e-300))
+
+
+def _form_factors(X64, N64, L64, tris, own, chunk: int = 4096):
     """(N,) float64 form factors of unit-normal receivers X64, N64 (N, 3) to the light L64 (K, 3) past the
-    triangles ``tris`` (T, 3, 3) or None, point i ignoring triangle ``own[i]`` (its own face) when given."""
+    triangles ``tris`` (T, 3, 3) or None, point i ignoring triangle ``own[i]`` (its own face) when given; in
+    chunks of ``chunk`` points (the batches' memory)."""
     area = _area_vector(L64)
     n_L = area / area.norm()
-    scale = float(torch.cat([X64.detach(), L64.detach()] + ([] if tris is None else [tris.detach().reshape(-1, 3)]))
-                  .abs().max().clamp_min(1e-300))
-    tol = SIDE_TOL * scale
-    skips = [-1] * X64.shape[0] if own is None else own.tolist()
-    values = []
-    for i in range(X64.shape[0]):
-        x, n = X64[i], N64[i]
-        pieces = _visible_pieces(x, n, L64, n_L, tris, tol, skips[i])
-        f = sum((polygon_form_factor(x, n, p) for p in pieces), start=x.new_zeros(()))
-        values.append(f)
-    if not values:
-        return X64.new_zeros(0)
-    return torch.stack(values)
+    tol = SIDE_TOL * _scale(X64, L64, tris)
+    out = []
+    for lo in range(0, X64.shape[0], chunk):
+        X, Nrm = X64[lo:lo + chunk], N64[lo:lo + chunk]
+        P, n, owner = _visible_batch(X, Nrm, L64, n_L, tris, tol, None if own is None else own[lo:lo + chunk])
+        F = _lambert_batch(P, n, X[owner], Nrm[owner])
+        out.append(X.new_zeros(X.shape[0]).index_add(0, owner, F))
+    return torch.cat(out) if out else X64.new_zeros(0)
 
 
 # ------------------------------------------------------------------------------------ the image it lights
