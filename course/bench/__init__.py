@@ -29,6 +29,9 @@
   table and a Pareto plot.
 * ``shadow-art`` (``course.bench.shadow_art``): an occluder fitted to a target shadow (a star, a T, an L) with
   the exact, Reynolds and variance-shadow-map gradients: time, start and final shadow IoU.
+* ``penumbra`` (``course.bench.penumbra``): the gradient of an area light's penumbra w.r.t. the occluders (exact,
+  shadow rays, edge sampling, finite differences, variance shadow maps averaged over the light): bias, spread
+  and time of each estimator against the exact one.
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
 * ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
   retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
@@ -53,7 +56,7 @@ import os
 import torch
 
 from . import (aa, explorers, fit, gradients, grading, kernels, learn, lectures, precision, raster, raytrace,
-               shadow_art, shadow_gradients, shadows, skips, soft, style)
+               penumbra, shadow_art, shadow_gradients, shadows, skips, soft, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -64,6 +67,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
+           "penumbra": penumbra,
            "explorers": explorers, "learn": learn, "grading": grading, "lectures": lectures}
 
 
