@@ -29,9 +29,9 @@ from .raster import plot_raster
 __all__ = ["fill_rule_explorer", "supersampling_explorer", "shadow_map_explorer", "bvh_explorer",
            "area_light_explorer", "soft_explorer", "edge_explorer", "finite_difference_explorer",
            "edge_sampling_explorer", "fit_explorer", "loss_landscape_explorer", "style_weight_explorer",
-           "shadow_light_explorer", "draw_fill_rule", "draw_supersampling", "draw_shadow_map", "draw_bvh",
+           "shadow_light_explorer", "penumbra_explorer", "draw_fill_rule", "draw_supersampling", "draw_shadow_map", "draw_bvh",
            "draw_area_light", "draw_soft", "draw_edge", "draw_finite_difference", "draw_edge_sampling",
-           "draw_fit", "draw_loss_landscape", "draw_style_weight", "draw_shadow_light", "EXPLORERS"]
+           "draw_fit", "draw_loss_landscape", "draw_style_weight", "draw_shadow_light", "draw_penumbra", "EXPLORERS"]
 
 F64 = torch.float64
 FIGURE_SCALE = 1.0          # the figures are 5-9 inches wide: at matplotlib's 100 dpi they already fill a notebook
@@ -931,6 +931,59 @@ def shadow_light_explorer() -> None:
     _show(draw_shadow_light)
 
 
+# ------------------------------------------------------------------------------------------------ lecture 14
+
+PENUMBRA_SIZE = 48                                                          # pixels a side of the floor's picture
+PENUMBRA_OCCLUDER = ((-0.3, -0.25), (0.3, -0.3), (0.25, 0.3), (-0.35, 0.2))  # a flat quadrilateral at height 0.8
+
+
+def draw_penumbra(size: float = 0.4, x: float = 0.3, height: float = 2.0) -> dict:
+    """The floor under a square area light of half side ``size`` centred at (x, height, -0.2), facing down, and
+    a flat quadrilateral occluder at height 0.8 (lecture 14's fits): the exact picture (``penumbra_picture``,
+    ambient 0.05 + 12 F, linear values shown divided by the brightest pixel, so that a small light's dim
+    picture is legible; the printed mean is the picture's own) and beside it its derivative with respect to the light's x, per pixel,
+    by forward-mode autograd through ``light_form_factor`` (exact; red: brighter as the light moves to +x,
+    blue: darker). The derivative lives in the penumbra and on the open floor (which the light's motion
+    brightens on one side and darkens on the other); in the umbra it is 0. Grow the light and the penumbra
+    widens, its gradient spreads and weakens; shrink it to a point and the penumbra collapses onto the hard
+    shadow's edge, where the derivative concentrates (a Dirac in the limit: lecture 12's problem).
+    """
+    import torch.autograd.forward_ad as fwAD
+
+    from ..shadows.area import light_form_factor
+    from ..shadows.area_fit import AMBIENT, POWER, floor_points, polygon_mesh, square_light
+    size = _check_range("size", size, 0.01, 2.0)
+    x = _check_range("x", x, -3.0, 3.0)
+    height = _check_range("height", height, 0.9, 5.0)
+    occluder = polygon_mesh(torch.tensor(PENUMBRA_OCCLUDER, dtype=F64), 0.8)
+    points, normals = floor_points(PENUMBRA_SIZE)
+    centre = torch.tensor([x, height, -0.2], dtype=F64)
+    with fwAD.dual_level():
+        moving = fwAD.make_dual(centre, torch.tensor([1.0, 0.0, 0.0], dtype=F64))
+        F = light_form_factor(points, normals, square_light(moving, size), occluder)
+        value, tangent = fwAD.unpack_dual(F)
+    n = PENUMBRA_SIZE
+    image = (AMBIENT + POWER * value).view(n, n)
+    d_image = (POWER * tangent).view(n, n)
+    line = (f"half side {size:g}, x {x:g}, height {height:g}: picture mean {_r4(image.mean())}, "
+            f"|d picture / dx| summed {_r4(d_image.abs().sum())}")
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.9))
+    show_image((image / image.max()).unsqueeze(-1).expand(n, n, 3), ax=axes[0], srgb=False)
+    axes[0].set_title(f"the floor (÷ its brightest): half side {size:g}, x = {x:g}, height {height:g}", fontsize=10)
+    signed_image(d_image, ax=axes[1])
+    axes[1].set_title("d picture / d (light x), exact", fontsize=10)
+    fig.colorbar(axes[1].images[0], ax=axes[1], fraction=0.046, pad=0.03,
+                 label="per unit (red: brighter, blue: darker)")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    return dict(mean=float(image.mean()), gradient=float(d_image.abs().sum()), line=line)
+
+
+def penumbra_explorer() -> None:
+    """Lecture 14: an area light's size and position, the penumbra and its exact gradient."""
+    _show(draw_penumbra)
+
+
 # ------------------------------------------------------------------------------------------------ the registry
 # name -> (explorer, its draw function, its controls (see ``explorer``), True where it redraws as a slider moves,
 # False where it redraws on release with its controls greyed out meanwhile)
@@ -959,4 +1012,6 @@ EXPLORERS = {
                         dict(weight=STYLE_WEIGHTS[3:4] + STYLE_WEIGHTS[:3] + STYLE_WEIGHTS[4:]), False),
     "12 shadow light": (shadow_light_explorer, draw_shadow_light,
                         dict(azimuth=(-180.0, 180.0, 5.0, 30.0), elevation=(15.0, 85.0, 5.0, 60.0)), False),
+    "14 penumbra": (penumbra_explorer, draw_penumbra,
+                    dict(size=(0.05, 0.8, 0.05, 0.4), x=(-1.0, 1.0, 0.1, 0.3), height=(1.2, 3.0, 0.1, 2.0)), False),
 }
