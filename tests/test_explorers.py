@@ -229,3 +229,30 @@ def test_lecture_12_shadow_light_is_legible_linear_and_carries_its_line():
     expected = shadowed_coverage(mesh, camera, colors, light).clamp(0, 1).numpy()
     assert abs(shown - expected).max() < 1e-12
     plt.close("all")
+
+
+def test_lecture_14_penumbra_is_legible_exact_and_carries_its_line():
+    """The explorer's gradient image is the derivative of its picture: forward-mode autograd against central
+    differences of the exact picture (float64, step 1e-6), at the defaults and with moved controls."""
+    import torch
+    from course.shadows.area import light_form_factor
+    from course.shadows.area_fit import AMBIENT, POWER, floor_points, polygon_mesh, square_light
+    for kwargs in ({}, dict(size=0.15, x=-0.6, height=2.7)):
+        out = E.draw_penumbra(**kwargs)
+        fig = plt.gcf()
+        assert out["line"] in [t.get_text() for t in fig.texts], kwargs
+        picture, gradient = fig.axes[0].images[0], fig.axes[1].images[0]
+        assert picture.get_array().shape[:2] == (E.PENUMBRA_SIZE, E.PENUMBRA_SIZE) and E.PENUMBRA_SIZE >= 40
+        assert len(fig.axes) == 3 and gradient.get_clim()[0] == -gradient.get_clim()[1]
+        size, x, height = kwargs.get("size", 0.4), kwargs.get("x", 0.3), kwargs.get("height", 2.0)
+        occluder = polygon_mesh(torch.tensor(E.PENUMBRA_OCCLUDER, dtype=torch.float64), 0.8)
+        points, normals = floor_points(E.PENUMBRA_SIZE)
+
+        def picture_at(cx):
+            light = square_light(torch.tensor([cx, height, -0.2], dtype=torch.float64), size)
+            return AMBIENT + POWER * light_form_factor(points, normals, light, occluder)
+        fd = ((picture_at(x + 1e-6) - picture_at(x - 1e-6)) / 2e-6).view(E.PENUMBRA_SIZE, E.PENUMBRA_SIZE)
+        shown = torch.as_tensor(gradient.get_array())
+        assert float((shown - fd).abs().max()) < 1e-6 * max(1.0, float(fd.abs().max()))
+        assert abs(out["gradient"] - float(fd.abs().sum())) < 1e-5 * out["gradient"]
+        plt.close("all")
