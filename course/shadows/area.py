@@ -20,10 +20,11 @@ n_L and the direction back to x. Three steps give it exactly, for every point, w
    another, so where occluders overlap each part of the light is removed once.
 3. **Lambert's formula.** For a polygon with vertices q_i, r_i = q_i - x,
 
-       F = (1 / 2π) Σ_i γ_i  n · (r_i × r_{i+1}) / |r_i × r_{i+1}|,    γ_i = ∠(r_i, r_{i+1}),
+       F = -(1 / 2π) Σ_i γ_i  n · (r_i × r_{i+1}) / |r_i × r_{i+1}|,    γ_i = ∠(r_i, r_{i+1}),
 
    the contour integral that Stokes' theorem makes of the area integral (Lambert 1760; the irradiance vector of
-   Arvo, SIGGRAPH 1994), summed over the visible pieces.
+   Arvo, SIGGRAPH 1994), summed over the visible pieces. The minus: a piece wound counter-clockwise about n_L,
+   which faces x, turns the sum negative.
 
 Every step is a differentiable formula of the inputs between combinatorial decisions (which side of a
 clipping line a vertex lies on, which occluder edges cut the light), so autograd gives the gradient with respect

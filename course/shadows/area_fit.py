@@ -8,10 +8,12 @@ of the light's corners and the occluders' vertices between the clipping decision
 (Adam) on the squared difference of two pictures moves the light and the occluder.
 
 * ``fit_area_light``: a square light facing down, ``centre`` (3,) and half side ``half``, recovered from a target
-  picture (optionally with noise, ``penumbra_picture(noise=...)``). Only the penumbra tells its size: the light's
-  power is known, so a light farther away and larger, or nearer and smaller, would light the open floor alike
-  but cast a wider or a narrower penumbra. Reported: the angle between the fitted and the true light's
-  direction seen from the occluder's centre, and the relative error of the size.
+  picture (optionally with noise, ``penumbra_picture(noise=...)``). The light's radiosity (power per unit area,
+  the ``POWER`` in ``ambient + POWER · F``) is known, so the open floor's brightness tells the light's angular
+  size; a light farther away and larger in proportion lights the open floor nearly alike, and only the shadow
+  tells them apart (at one angular size the farther light casts the smaller shadow and the narrower penumbra).
+  Reported: the angle between the fitted and the true light's direction seen from the occluder's centre, and
+  the relative error of the size.
 * ``fit_occluder``: a flat polygon at a known height (its vertices' x and z free, a fan of triangles) moved until
   its soft shadow matches a target's; reported: the picture's error and the polygons' IoU (on a fine grid).
 """
@@ -29,7 +31,8 @@ __all__ = ["square_light", "floor_points", "penumbra_picture", "light_angle", "f
            "polygon_iou", "fit_occluder", "FitHistory"]
 
 AMBIENT = 0.05
-POWER = 12.0             # the light's radiosity × π: a unit form factor gives a pixel 12 (the floor's near F ≈ 0.05)
+POWER = 12.0             # the light's radiosity (× the floor's albedo): a form factor F adds 12 F to a pixel
+                         # (the floor under the light sees F ≈ 0.05)
 
 
 def square_light(centre, half) -> torch.Tensor:

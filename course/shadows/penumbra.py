@@ -69,7 +69,8 @@ def _square(half, height, dtype=torch.float64):
 
 
 def penumbra_scene(name: str = "square", n: int = 12) -> PenumbraScene:
-    """``square``: a unit light 2 above the floor, a tilted square occluder (two triangles) about 1 above it,
+    """``square``: a unit light 2 above the floor, a tilted, roughly square occluder (two triangles, not quite
+    coplanar) 0.9 to 1.05 above it,
     its shadow's edge running through the receivers; ``overlap``: two triangles at heights 0.9 and 1.3 that
     overlap as seen from most receivers (each part of the light hidden once). The receivers: an n × n grid
     over the floor's penumbra (``[-1.2, 1.2]²``), weights in [0.5, 1.5] (fixed, seeded)."""
