@@ -1,0 +1,186 @@
+"""3D Gaussian splatting in torch, float64 by default, readable (lecture 15).
+
+A scene of N Gaussians: centres ``means`` (N, 3), standard deviations along each one's own axes ``scales``
+(N, 3), orientations ``rotations`` (N, 4) as unit quaternions (w, x, y, z), ``opacities`` (N,) in [0, 1] and
+``colors`` (N, 3). ``render_gaussians`` draws them with the rules of Kerbl et al.'s reference rasterizer
+("3D Gaussian Splatting for Real-Time Radiance Field Rendering", SIGGRAPH 2023), evaluated at the course's pixel
+centres (pixel (i, j) covers [j, j+1) × [i, i+1), its centre (j + ½, i + ½)):
+
+1. **Cull** a Gaussian whose mean lies at most 0.2 in front of the camera (view-space depth z <= 0.2).
+2. **3D covariance** ``Σ = R S Sᵀ Rᵀ``, R the rotation of the quaternion, S = diag(scales).
+3. **2D covariance** by the projection's Jacobian at the mean: ``Σ₂ = J W Σ Wᵀ Jᵀ + 0.3 I`` (pixels²), W the
+   camera's rotation and J the derivative of the pixel position with respect to the camera-space point,
+   ``K₂ [[1/z, 0, -x/z²], [0, 1/z, -y/z²]]`` (K₂ the upper-left 2 × 2 of K; ``K₂ [[1, 0, 0], [0, 1, 0]]`` for an
+   orthographic camera). The 0.3 px² is the reference's low-pass filter: no Gaussian is thinner than a pixel's
+   footprint. The projected mean is the mean's pixel position.
+4. **Opacity at a pixel**: ``α = min(0.99, o · exp(-½ dᵀ Σ₂⁻¹ d))``, d the pixel centre minus the projected mean;
+   a Gaussian is skipped at a pixel where α < 1/255.
+5. **Compositing**, front to back in the order of the means' view-space depth (one order for the whole image:
+   a visibility decision, lecture 15), ``C += c α T``, ``T ← T (1 - α)``, stopping before the Gaussian that would
+   take the transmittance T below 1e-4 (that one is not added); then ``C + T · background``.
+
+Two rules of the reference are left out, both choices of its tiling rather than of the image model: it clamps
+x/z and y/z to 1.3 times the field of view before forming J (a guard for Gaussians far off screen), and it
+evaluates a Gaussian only in the 16 × 16 tiles its 3-sigma box touches, so a pixel of a neighbouring tile, still
+above the 1/255 cut, misses it. Here every Gaussian is evaluated wherever its α reaches 1/255: the image is the
+same for every tile or chunk size (``tile``), which only skips Gaussians that cannot reach the cut in a tile.
+
+Autograd differentiates every smooth part: the means, scales, rotations, opacities, colours and the camera's
+K, R and t. It does not see two discontinuities, both decisions: the **depth order** (when two means swap depth,
+the image jumps where both cover a pixel) and the **cut-offs** (α < 1/255, α clamped at 0.99, T < 1e-4): lecture
+15 measures both.
+"""
+from __future__ import annotations
+
+
+import torch
+
+from .tensors import _check_finite, as_tensor
+
+__all__ = ["render_gaussians", "quaternion_to_matrix", "covariance_3d", "project_gaussians", "NEAR", "ALPHA_MIN",
+           "ALPHA_MAX", "T_MIN", "BLUR"]
+
+NEAR = 0.2               # a mean closer than this (view-space depth) is culled
+ALPHA_MIN = 1.0 / 255.0  # a Gaussian is skipped at a pixel where its alpha is below this
+ALPHA_MAX = 0.99         # alpha is clamped to this
+T_MIN = 1e-4             # compositing stops before the transmittance would fall below this
+BLUR = 0.3               # px², added to the 2D covariance's diagonal (the reference's low-pass filter)
+
+
+def quaternion_to_matrix(q) -> torch.Tensor:
+    """(N, 3, 3) rotation matrices of unit quaternions q (N, 4), (w, x, y, z)."""
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1).reshape(q.shape[:-1] + (3, 3))
+
+
+def covariance_3d(scales, rotations) -> torch.Tensor:
+    """(N, 3, 3) ``Σ = R S Sᵀ Rᵀ`` (module docstring, step 2)."""
+    M = quaternion_to_matrix(rotations) * scales[..., None, :]             # R S: column k scaled by s_k
+    return M @ M.transpose(-1, -2)
+
+
+def project_gaussians(means, scales, rotations, camera):
+    """The Gaussians seen by ``camera``: (pixel means (N, 2), 2D covariances (N, 2, 2) with the 0.3 px² added,
+    view-space depths (N,)) (module docstring, steps 2-3), differentiable in everything."""
+    K, R, t = camera.K.to(means.dtype), camera.R.to(means.dtype), camera.t.to(means.dtype)
+    cam = means @ R.T + t                                                   # (N, 3) camera space
+    x, y, z = cam.unbind(-1)
+    K2 = K[:2, :2]
+    zero, one = torch.zeros_like(z), torch.ones_like(z)
+    if camera.orthographic:
+        P = torch.stack([one, zero, zero, zero, one, zero], -1).view(-1, 2, 3)
+        xy = torch.stack([x, y], -1)
+    else:
+        inv = 1 / z
+        P = torch.stack([inv, zero, -x * inv * inv, zero, inv, -y * inv * inv], -1).view(-1, 2, 3)
+        xy = torch.stack([x * inv, y * inv], -1)
+    J = K2 @ P                                                              # (N, 2, 3)
+    T = J @ R                                                               # J W
+    cov2 = T @ covariance_3d(scales, rotations) @ T.transpose(-1, -2)
+    cov2 = cov2 + BLUR * torch.eye(2, dtype=means.dtype, device=means.device)
+    mean2 = xy @ K2.T + K[:2, 2]
+    return mean2, cov2, z
+
+
+def _check(means, scales, rotations, opacities, colors, background):
+    m = as_tensor(means, name="means")
+    if m.dim() != 2 or m.shape[1] != 3:
+        raise ValueError(f"means must have shape (N, 3), got {tuple(m.shape)}")
+    N = m.shape[0]
+    dtype = m.dtype if m.dtype in (torch.float32, torch.float64) else torch.float64
+    out = [m.to(dtype)]
+    for value, name, shape in ((scales, "scales", (N, 3)), (rotations, "rotations", (N, 4)),
+                               (opacities, "opacities", (N,)), (colors, "colors", (N, 3))):
+        v = as_tensor(value, dtype=dtype, name=name)
+        if tuple(v.shape) != shape:
+            raise ValueError(f"{name} must have shape {shape}, got {tuple(v.shape)}")
+        out.append(v)
+    for v, name in zip(out, ("means", "scales", "rotations", "opacities", "colors")):
+        _check_finite(v, name)
+    m, s, q, o, c = out
+    if N and bool((s.detach() <= 0).any()):
+        raise ValueError("scales must be positive (a Gaussian's standard deviations along its axes)")
+    if N and bool(((o.detach() < 0) | (o.detach() > 1)).any()):
+        raise ValueError("opacities must lie in [0, 1]")
+    if N:
+        norm = q.detach().norm(dim=1)
+        if bool(((norm - 1).abs() > 1e-6).any()):
+            raise ValueError(f"rotations must be unit quaternions (w, x, y, z): a norm is {float(norm.max()):.6g}; "
+                             "normalise them (q / q.norm(dim=1, keepdim=True)) before rendering")
+    bg = as_tensor(background, dtype=dtype, name="background")
+    if tuple(bg.shape) != (3,):
+        raise ValueError(f"background must have shape (3,), got {tuple(bg.shape)}")
+    return m, s, q, o, c, bg
+
+
+def render_gaussians(means, scales, rotations, opacities, colors, camera, background=(0.0, 0.0, 0.0), *,
+                     tile: int = 16) -> torch.Tensor:
+    """The image (H, W, 3) of N Gaussians by Kerbl et al.'s rules (module docstring), at the pixel centres.
+
+    means (N, 3), scales (N, 3) > 0, rotations (N, 4) unit quaternions (w, x, y, z), opacities (N,) in [0, 1],
+    colors (N, 3); camera a course ``Camera``; background (3,). Computed in the means' dtype (float64 unless
+    they are float32); differentiable by autograd in every input and the camera's K, R and t, except across the
+    decisions (depth order, cut-offs). ``tile``: pixels a side of the blocks the image is composited in (each
+    block skips the Gaussians that cannot reach α = 1/255 in it); the image does not depend on it.
+    """
+    m, s, q, o, c, bg = _check(means, scales, rotations, opacities, colors, background)
+    tile = int(tile)
+    if tile < 1:
+        raise ValueError(f"tile must be a positive integer, got {tile!r}")
+    H, W = camera.height, camera.width
+    image = bg.expand(H, W, 3).clone()
+    if m.shape[0] == 0:
+        return image
+    mean2, cov2, z = project_gaussians(m, s, q, camera)
+    order = torch.argsort(z.detach(), stable=True)                           # front to back
+    keep = order[z.detach()[order] > NEAR]                                    # culled: too near (or behind)
+    if keep.numel() == 0:
+        return image
+    mean2, cov2, o, c = mean2[keep], cov2[keep], o[keep], c[keep]
+    a, b, d = cov2[:, 0, 0], cov2[:, 0, 1], cov2[:, 1, 1]
+    det = a * d - b * b
+    conic = torch.stack([d / det, -b / det, a / det], -1)                    # Σ₂⁻¹ as (A, B, C)
+    # where α can reach 1/255: o exp(-q/2) >= 1/255, q <= 2 ln(255 o); the ellipse's box, padded a hair
+    reach = 2 * torch.log((o.detach() / ALPHA_MIN).clamp_min(1.0))
+    half_w = (reach * a.detach()).sqrt() * (1 + 1e-9) + 1e-9
+    half_h = (reach * d.detach()).sqrt() * (1 + 1e-9) + 1e-9
+    lo = torch.stack([mean2.detach()[:, 0] - half_w, mean2.detach()[:, 1] - half_h], -1)
+    hi = torch.stack([mean2.detach()[:, 0] + half_w, mean2.detach()[:, 1] + half_h], -1)
+    rows = []
+    for i0 in range(0, H, tile):
+        row = []
+        for j0 in range(0, W, tile):
+            i1, j1 = min(i0 + tile, H), min(j0 + tile, W)
+            near = ((hi[:, 0] >= j0 + 0.5) & (lo[:, 0] <= j1 - 0.5) & (hi[:, 1] >= i0 + 0.5)
+                    & (lo[:, 1] <= i1 - 0.5)).nonzero().squeeze(1)
+            row.append(_composite(mean2[near], conic[near], o[near], c[near], bg, i0, i1, j0, j1))
+        rows.append(torch.cat(row, 1))
+    return torch.cat(rows, 0)
+
+
+def _composite(mean2, conic, o, c, bg, i0, i1, j0, j1):
+    """(i1 - i0, j1 - j0, 3) the block's pixels composited front to back (module docstring, steps 4-5) from the
+    Gaussians given, in depth order."""
+    dtype = mean2.dtype
+    ii = torch.arange(i0, i1, dtype=dtype, device=mean2.device) + 0.5
+    jj = torch.arange(j0, j1, dtype=dtype, device=mean2.device) + 0.5
+    py, px = torch.meshgrid(ii, jj, indexing="ij")
+    p = torch.stack([px.reshape(-1), py.reshape(-1)], -1)                     # (P, 2) pixel centres
+    if mean2.shape[0] == 0:
+        return bg.expand(i1 - i0, j1 - j0, 3).clone()
+    dx = p[:, None, 0] - mean2[None, :, 0]                                    # (P, N)
+    dy = p[:, None, 1] - mean2[None, :, 1]
+    power = -0.5 * (conic[:, 0] * dx * dx + 2 * conic[:, 1] * dx * dy + conic[:, 2] * dy * dy)
+    alpha = (o * torch.exp(power)).clamp(max=ALPHA_MAX)
+    alpha = torch.where(alpha >= ALPHA_MIN, alpha, torch.zeros_like(alpha))  # skipped where below 1/255
+    clear = 1 - alpha
+    before = torch.cumprod(torch.cat([torch.ones_like(clear[:, :1]), clear[:, :-1]], 1), 1)   # T before each
+    stop = (before * clear).detach() < T_MIN                                  # this one would take T below 1e-4
+    done = torch.cummax(stop.to(torch.int8), 1).values.bool()                 # it and every one after: not added
+    weight = torch.where(done, torch.zeros_like(alpha), alpha * before)
+    last = torch.where(done, torch.ones_like(clear), clear).prod(1)           # T after the added ones
+    color = weight @ c + last[:, None] * bg
+    return color.view(i1 - i0, j1 - j0, 3)
