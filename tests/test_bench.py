@@ -219,3 +219,25 @@ def test_bench_raytrace_scaling_plot_rejects_rows_without_rays():
     from course.bench.raytrace import plot_scaling
     with pytest.raises(ValueError, match="no primary or incoherent rows"):
         plot_scaling([dict(scene="S4", faces=1280, kind="build", rays=0, ms=3.0)])
+
+
+def test_bench_penumbra_rows_bias_and_plot(tmp_path, capsys):
+    """The penumbra bench on a tiny configuration: every estimator a row; the exact one is its own reference,
+    autograd through shadow rays is biased by exactly 1 with no spread, edge sampling is close; the plot."""
+    from course.bench import penumbra
+    configs = (("shadow_rays", "S=8", dict(samples=8)), ("edge_sampling", "S=8 M=64", dict(samples=8, edge_samples=64)),
+               ("finite_differences", "S=8 h=1e-2", dict(samples=8, step=1e-2)), ("vsm", "2x2 R=16",
+                                                                                  dict(grid=2, resolution=16)))
+    rows = penumbra.measure(scenes=("square",), seeds=2, n=3, repeat=1, configs=configs)
+    assert [r["method"] for r in rows] == ["exact", "shadow_rays", "edge_sampling", "finite_differences", "vsm"]
+    assert rows[0]["error"] == 0 and rows[1]["bias"] == 1.0 and rows[1]["spread"] == 0.0
+    assert rows[2]["error"] < 0.5 and all(r["ms"] > 0 for r in rows)
+    penumbra.plot_pareto(rows, tmp_path / "p.png")
+    assert (tmp_path / "p.png").stat().st_size > 0
+
+
+def test_bench_splats_rows(capsys):
+    from course.bench import splats
+    rows = splats.bench_splats(counts=(40,), sizes=(12,), repeat=1)
+    assert len(rows) == 1 and rows[0]["count"] == 40 and rows[0]["forward_ms"] > 0 and rows[0]["mesh_ms"] > 0
+    assert "img/s" in capsys.readouterr().out

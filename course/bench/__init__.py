@@ -32,6 +32,8 @@
 * ``penumbra`` (``course.bench.penumbra``): the gradient of an area light's penumbra w.r.t. the occluders (exact,
   shadow rays, edge sampling, finite differences, variance shadow maps averaged over the light): bias, spread
   and time of each estimator against the exact one.
+* ``splats`` (``course.bench.splats``): Gaussian splatting's images per second against the Gaussian count and
+  the image size, forward and backward, beside the mesh rasterizer on the same views.
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
 * ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
   retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
@@ -56,7 +58,7 @@ import os
 import torch
 
 from . import (aa, explorers, fit, gradients, grading, kernels, learn, lectures, precision, raster, raytrace,
-               penumbra, shadow_art, shadow_gradients, shadows, skips, soft, style)
+               penumbra, shadow_art, shadow_gradients, shadows, skips, soft, splats, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -67,7 +69,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
-           "penumbra": penumbra,
+           "penumbra": penumbra, "splats": splats,
            "explorers": explorers, "learn": learn, "grading": grading, "lectures": lectures}
 
 
