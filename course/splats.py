@@ -33,12 +33,14 @@ the image jumps where both cover a pixel) and the **cut-offs** (α < 1/255, α c
 from __future__ import annotations
 
 
+import math
+
 import torch
 
 from .tensors import _check_finite, as_tensor
 
-__all__ = ["render_gaussians", "quaternion_to_matrix", "covariance_3d", "project_gaussians", "NEAR", "ALPHA_MIN",
-           "ALPHA_MAX", "T_MIN", "BLUR"]
+__all__ = ["render_gaussians", "render_gaussians_volume", "quaternion_to_matrix", "covariance_3d",
+           "project_gaussians", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
 
 NEAR = 0.2               # a mean closer than this (view-space depth) is culled
 ALPHA_MIN = 1.0 / 255.0  # a Gaussian is skipped at a pixel where its alpha is below this
@@ -184,3 +186,64 @@ def _composite(mean2, conic, o, c, bg, i0, i1, j0, j1):
     last = torch.where(done, torch.ones_like(clear), clear).prod(1)           # T after the added ones
     color = weight @ c + last[:, None] * bg
     return color.view(i1 - i0, j1 - j0, 3)
+
+
+# ------------------------------------------------------------------------------- the same Gaussians as a volume
+
+def render_gaussians_volume(means, scales, rotations, opacities, colors, camera, background=(0.0, 0.0, 0.0), *,
+                            samples: int = 256, near: float | None = None, far: float | None = None,
+                            chunk: int = 4096) -> torch.Tensor:
+    """(H, W, 3) the Gaussians as a participating medium, ray-marched (no sort, no projection): the density
+    ``σ(x) = Σ_i κ_i exp(-½ (x - μ_i)ᵀ Σ_i⁻¹ (x - μ_i))``, the colour where it emits ``Σ_i σ_i c_i / σ``, and
+    NeRF's quadrature (``course.volume``) with ``samples`` equal steps from ``near`` to ``far`` along each
+    pixel-centre ray (default: the span of the means' depths, widened by 4 of the largest standard deviation).
+
+    ``κ_i`` makes one Gaussian alone look as the splat does at its centre: the optical depth along the ray from
+    the camera through its mean is ``κ_i sqrt(2π / (dᵀ Σ_i⁻¹ d))`` (the 3D Gaussian integrated along the line), set
+    to ``-ln(1 - o_i)`` so that the opacity there is o_i. Elsewhere the two differ where splatting approximates:
+    each Gaussian composited whole at its mean's depth (two that interpenetrate are drawn one over the other), the
+    projection linearised at the mean (J), the 0.3 px² blur, and ``1 - e^{-τ}`` against the splat's linear
+    ``o e^{-q/2}`` away from the centre. Lecture 15 shows where. Differentiable; float64 unless the means are
+    float32."""
+    m, s, q, o, c, bg = _check(means, scales, rotations, opacities, colors, background)
+    n = int(samples)
+    if n < 1:
+        raise ValueError(f"samples must be a positive integer, got {samples!r}")
+    H, W = camera.height, camera.width
+    origins, directions = camera.rays()
+    origins = origins.reshape(-1, 3).to(m.dtype)
+    directions = directions.reshape(-1, 3).to(m.dtype)
+    directions = directions / directions.norm(dim=1, keepdim=True)
+    if m.shape[0] == 0:
+        return bg.expand(H, W, 3).clone()
+    inv = torch.linalg.inv(covariance_3d(s, q))                                  # (N, 3, 3)
+    eye = -camera.R.to(m.dtype).T @ camera.t.to(m.dtype)
+    toward = m - eye
+    toward = toward / toward.norm(dim=1, keepdim=True)
+    line = torch.einsum("ni,nij,nj->n", toward, inv, toward)                   # dᵀ Σ⁻¹ d along the central ray
+    kappa = -torch.log1p(-o.clamp(max=1 - 1e-12)) / torch.sqrt(2 * math.pi / line)
+    depth = (m - eye) @ camera.R.to(m.dtype)[2]
+    pad = 4 * float(s.detach().max())
+    lo = float(depth.detach().min()) - pad if near is None else float(near)
+    hi = float(depth.detach().max()) + pad if far is None else float(far)
+    lo = max(lo, 1e-6)
+    out = []
+    for start in range(0, origins.shape[0], chunk):
+        o_r, d_r = origins[start:start + chunk], directions[start:start + chunk]
+        cos = d_r @ camera.R.to(m.dtype)[2]                                    # depth per unit along the ray
+        s0, s1 = lo / cos, hi / cos
+        delta = (s1 - s0) / n                                                  # (R,)
+        t = s0[:, None] + (torch.arange(n, dtype=m.dtype) + 0.5)[None] * delta[:, None]   # (R, n)
+        x = o_r[:, None, :] + t[..., None] * d_r[:, None, :]                   # (R, n, 3)
+        diff = x[:, :, None, :] - m[None, None]                                # (R, n, N, 3)
+        qd = torch.einsum("rsni,nij,rsnj->rsn", diff, inv, diff)
+        sig_i = kappa * torch.exp(-0.5 * qd)                                   # (R, n, N)
+        sig = sig_i.sum(-1)
+        emit = sig_i @ c                                                       # (R, n, 3) = σ · colour
+        tau = sig * delta[:, None]
+        before = torch.exp(-torch.cumsum(torch.cat([torch.zeros_like(tau[:, :1]), tau[:, :-1]], 1), 1))
+        alpha = -torch.expm1(-tau)
+        colour = emit / sig.clamp_min(1e-300)[..., None]
+        image = ((before * alpha)[..., None] * colour).sum(1) + torch.exp(-tau.sum(1))[:, None] * bg
+        out.append(image)
+    return torch.cat(out).view(H, W, 3)
