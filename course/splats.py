@@ -196,7 +196,7 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
     """(H, W, 3) the Gaussians as a participating medium, ray-marched (no sort, no projection): the density
     ``σ(x) = Σ_i κ_i exp(-½ (x - μ_i)ᵀ Σ_i⁻¹ (x - μ_i))``, the colour where it emits ``Σ_i σ_i c_i / σ``, and
     NeRF's quadrature (``course.volume``) with ``samples`` equal steps from ``near`` to ``far`` along each
-    pixel-centre ray (default: the span of the means' depths, widened by 4 of the largest standard deviation).
+    pixel-centre ray (default: the span of the means' depths, widened by 6 of the largest standard deviation).
 
     ``κ_i`` makes one Gaussian alone look as the splat does at its centre: the optical depth along the ray from
     the camera through its mean is ``κ_i sqrt(2π / (dᵀ Σ_i⁻¹ d))`` (the 3D Gaussian integrated along the line), set
@@ -223,7 +223,7 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
     line = torch.einsum("ni,nij,nj->n", toward, inv, toward)                   # dᵀ Σ⁻¹ d along the central ray
     kappa = -torch.log1p(-o.clamp(max=1 - 1e-12)) / torch.sqrt(2 * math.pi / line)
     depth = (m - eye) @ camera.R.to(m.dtype)[2]
-    pad = 4 * float(s.detach().max())
+    pad = 6 * float(s.detach().max())                                          # the tails beyond: 2e-9 of τ
     lo = float(depth.detach().min()) - pad if near is None else float(near)
     hi = float(depth.detach().max()) + pad if far is None else float(far)
     lo = max(lo, 1e-6)

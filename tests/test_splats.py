@@ -245,7 +245,8 @@ def test_bad_input_is_named(bad, match):
 def test_one_gaussian_as_a_volume_has_the_splats_opacity_along_its_central_ray():
     """``render_gaussians_volume`` sets each Gaussian's density so that the ray from the camera through its mean
     sees opacity o: the pixel whose centre ray passes through the mean (odd image size, the camera looking at
-    it) is o c + (1 - o) background, to the quadrature's error, which falls as the samples grow."""
+    it) is o c + (1 - o) background, to the quadrature's error (the midpoint rule on a smooth profile: 1e-11 from
+    64 samples on)."""
     from course.splats import render_gaussians_volume
     cam = Camera.look_at((0.3, 0.2, 4.0), (0.0, 0.0, 0.0), fov_y=30.0, width=31, height=31, dtype=F64)
     means = torch.zeros(1, 3, dtype=F64)
@@ -256,7 +257,7 @@ def test_one_gaussian_as_a_volume_has_the_splats_opacity_along_its_central_ray()
     want = o * c[0] + (1 - o) * torch.tensor(BACKGROUND, dtype=F64)
     errors = [float((render_gaussians_volume(means, scales, rotations, o, c, cam, BACKGROUND, samples=n)[15, 15]
                      - want).abs().max()) for n in (64, 512)]
-    assert errors[1] < 1e-6 and errors[1] < errors[0]
+    assert max(errors) < 1e-9, errors
     leaf = means.clone().requires_grad_()
     g, = torch.autograd.grad(render_gaussians_volume(leaf, scales, rotations, o, c, cam, BACKGROUND, samples=64).sum(),
                              leaf)
