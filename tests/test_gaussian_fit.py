@@ -33,3 +33,11 @@ def test_densify_clones_small_splits_large_and_prunes_faint():
     assert out[0].shape[0] == 5
     assert sorted(round(float(s), 4) for s in out[1].exp().amax(1)) == [0.01, 0.01, 0.01, 0.125, 0.125]
     assert all(p.requires_grad for p in out)
+
+
+def test_a_small_density_grid_learns_the_held_out_views():
+    from course.inverse.volume_fit import fit_density_grid
+    data = shaded_data(models.teapot(6, dtype=torch.float64), n_views=12, size=24, resolution=24, hull=False)
+    fit = fit_density_grid(data, resolution=12, steps=60, samples=24, eval_every=0)
+    assert fit.psnr > fit.start_psnr + 8, (fit.start_psnr, fit.psnr)
+    assert bool((fit.density >= 0).all()) and fit.colors.shape == (12, 12, 12, 3)
