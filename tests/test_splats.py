@@ -262,3 +262,34 @@ def test_one_gaussian_as_a_volume_has_the_splats_opacity_along_its_central_ray()
     g, = torch.autograd.grad(render_gaussians_volume(leaf, scales, rotations, o, c, cam, BACKGROUND, samples=64).sum(),
                              leaf)
     assert bool(torch.isfinite(g).all()) and float(g.abs().sum()) > 0
+
+
+def test_autograd_misses_the_jump_at_the_one_in_255_cut_off():
+    """One Gaussian over the background: as its opacity o grows, its α at an outer pixel crosses 1/255 and the
+    pixel jumps by α (c - background) there (the Gaussian appears); autograd sees only the smooth part on each
+    side, and central differences straddling the cut see the jump divided by 2h."""
+    cam = camera(width=9, height=9)
+    means = torch.zeros(1, 3, dtype=F64)
+    scales = torch.full((1, 3), 0.15, dtype=F64)
+    rotations = torch.tensor([[1.0, 0, 0, 0]], dtype=F64)
+    colors = torch.tensor([[1.0, 1.0, 1.0]], dtype=F64)
+    mean2, cov2, _ = project_gaussians(means, scales, rotations, cam)
+    ii, jj = torch.meshgrid(torch.arange(9, dtype=F64) + 0.5, torch.arange(9, dtype=F64) + 0.5, indexing="ij")
+    d = torch.stack([jj, ii], -1) - mean2[0]                                # every pixel centre
+    fall = torch.exp(-0.5 * torch.einsum("hwi,ij,hwj->hw", d, torch.linalg.inv(cov2[0]), d))
+    row, col = divmod(int((fall - 0.02).abs().argmin()), 9)                 # a pixel where it falls to about 2 %
+    falloff = float(fall[row, col])
+    o_cut = (1 / 255) / falloff                                             # o where α at that pixel is 1/255
+    assert 0.05 < o_cut < 0.95
+
+    def pixel(o):
+        return render_gaussians(means, scales, rotations, torch.tensor([o], dtype=F64), colors, cam,
+                                BACKGROUND)[row, col, 0]
+    jump = float(pixel(o_cut * (1 + 1e-9)) - pixel(o_cut * (1 - 1e-9)))
+    assert abs(jump - (1 / 255) * (1.0 - BACKGROUND[0])) < 1e-8               # α (c - background) at the cut
+    o = torch.tensor([o_cut * (1 + 1e-6)], dtype=F64, requires_grad=True)
+    g, = torch.autograd.grad(render_gaussians(means, scales, rotations, o, colors, cam, BACKGROUND)[row, col, 0], o)
+    assert abs(float(g) - falloff * (1.0 - BACKGROUND[0])) < 1e-9           # the smooth part: dα/do (c - bg)
+    h = 1e-4
+    fd = float(pixel(o_cut + h) - pixel(o_cut - h)) / (2 * h)
+    assert abs(fd - float(g) - jump / (2 * h)) < 1e-3 * abs(jump / (2 * h))
