@@ -40,7 +40,7 @@ import torch
 from .tensors import _check_finite, as_tensor
 
 __all__ = ["render_gaussians", "render_gaussians_volume", "quaternion_to_matrix", "covariance_3d",
-           "project_gaussians", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
+           "project_gaussians", "swap_scene", "swap_study", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
 
 NEAR = 0.2               # a mean closer than this (view-space depth) is culled
 ALPHA_MIN = 1.0 / 255.0  # a Gaussian is skipped at a pixel where its alpha is below this
@@ -247,3 +247,49 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
         image = ((before * alpha)[..., None] * colour).sum(1) + torch.exp(-tau.sum(1))[:, None] * bg
         out.append(image)
     return torch.cat(out).view(H, W, 3)
+
+
+# ------------------------------------------------------------------------------- the depth swap, measured
+
+def swap_scene(size: int = 16):
+    """Two overlapping Gaussians, red in front at s = 0 of the blue one's motion: ``(params, camera, toward,
+    swap)`` where the blue one's mean moves by ``s · toward`` (the unit view direction) and ``swap`` is the s at
+    which the two means' view depths are equal (there the depth order, and the image, jump)."""
+    from .camera import Camera
+    camera = Camera.look_at((0.4, 0.6, 4.0), (0.0, 0.0, 0.0), fov_y=45.0, width=size, height=size,
+                            dtype=torch.float64)
+    eye = -camera.R.T @ camera.t
+    toward = -eye / eye.norm()
+    means = torch.stack([torch.zeros(3, dtype=torch.float64), torch.tensor([0.05, 0.0, 0.0], dtype=torch.float64)])
+    params = (means, torch.full((2, 3), 0.5, dtype=torch.float64),
+              torch.tensor([[1.0, 0, 0, 0], [1.0, 0, 0, 0]], dtype=torch.float64),
+              torch.tensor([0.8, 0.8], dtype=torch.float64), torch.tensor([[1.0, 0, 0], [0, 0, 1.0]], dtype=torch.float64))
+    swap = float((means[0] - means[1]) @ camera.R[2])
+    return params, camera, toward, swap
+
+
+def swap_study(width: float = 0.05, samples: int = 64, size: int = 16) -> dict:
+    """What autograd misses at a depth swap, and what a boundary term adds (lecture 15). ``L(s)``: the red
+    channel of ``swap_scene``'s image summed, the blue Gaussian moved by s. L jumps by ``jump`` at the swap s*.
+    Smooth L over a window, ``L_w(s*) = mean of L over [s* - w, s* + w]``: its derivative is exactly
+    ``(L(s* + w) - L(s* - w)) / 2w`` (``smoothed``); autograd averaged over the window (``autograd``, a midpoint
+    rule with ``samples`` points) differentiates L's smooth pieces only, and misses ``jump / 2w`` (``boundary``),
+    the jump times the density of s at the swap: the boundary term. Returns those numbers (floats)."""
+    params, camera, toward, swap = swap_scene(size)
+    means = params[0]
+
+    def loss(s):
+        m = torch.stack([means[0], means[1] + s * toward])
+        return render_gaussians(m, *params[1:], camera)[..., 0].sum()
+    w = float(width)
+    eps = 1e-9
+    jump = float(loss(torch.tensor(swap + eps)) - loss(torch.tensor(swap - eps)))
+    smoothed = float(loss(torch.tensor(swap + w)) - loss(torch.tensor(swap - w))) / (2 * w)
+    grads = []
+    for k in range(int(samples)):
+        s = torch.tensor(swap - w + (k + 0.5) * 2 * w / samples, dtype=torch.float64, requires_grad=True)
+        g, = torch.autograd.grad(loss(s), s)
+        grads.append(float(g))
+    autograd = sum(grads) / len(grads)
+    return dict(jump=jump, smoothed=smoothed, autograd=autograd, boundary=jump / (2 * w),
+                corrected=autograd + jump / (2 * w))

@@ -293,3 +293,14 @@ def test_autograd_misses_the_jump_at_the_one_in_255_cut_off():
     h = 1e-4
     fd = float(pixel(o_cut + h) - pixel(o_cut - h)) / (2 * h)
     assert abs(fd - float(g) - jump / (2 * h)) < 1e-3 * abs(jump / (2 * h))
+
+
+def test_the_boundary_term_closes_the_gap_at_a_swap():
+    """Averaged over a window around the swap, autograd's derivative is far from the derivative of the averaged
+    loss; adding the jump times the window's density (the boundary term) closes the gap (to the cut-off jumps the
+    window also holds: 1e-4 of it)."""
+    from course.splats import swap_study
+    study = swap_study(width=0.05, samples=16, size=12)
+    assert study["jump"] > 1.0
+    assert abs(study["autograd"] - study["smoothed"]) > 0.9 * abs(study["smoothed"])
+    assert abs(study["corrected"] - study["smoothed"]) < 1e-4 * abs(study["smoothed"])
