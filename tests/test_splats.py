@@ -304,3 +304,10 @@ def test_the_boundary_term_closes_the_gap_at_a_swap():
     assert study["jump"] > 1.0
     assert abs(study["autograd"] - study["smoothed"]) > 0.9 * abs(study["smoothed"])
     assert abs(study["corrected"] - study["smoothed"]) < 1e-4 * abs(study["smoothed"])
+
+
+def test_splat_and_volume_differ_most_where_gaussians_interpenetrate():
+    from course.splats import splat_volume_study
+    study = splat_volume_study(size=16, samples=128)
+    assert set(study) == {"alone", "interpenetrating", "off_axis"}
+    assert 0 < study["alone"] < 0.1 and study["interpenetrating"] > 2 * study["alone"]
