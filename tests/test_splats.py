@@ -311,3 +311,12 @@ def test_splat_and_volume_differ_most_where_gaussians_interpenetrate():
     study = splat_volume_study(size=16, samples=128)
     assert set(study) == {"alone", "interpenetrating", "off_axis"}
     assert 0 < study["alone"] < 0.1 and study["interpenetrating"] > 2 * study["alone"]
+
+
+def test_float32_scenes_render_in_float32_close_to_float64():
+    scene = random_scene(7, n=20)
+    cam = camera()
+    f64 = render_gaussians(*scene, cam, BACKGROUND)
+    f32 = render_gaussians(*(v.float() for v in scene), cam, BACKGROUND)
+    assert f32.dtype == torch.float32
+    assert float((f32.double() - f64).abs().max()) < 1e-4
