@@ -59,9 +59,10 @@ NAMES = {"1.1": "rodrigues", "1.2": "look_at", "1.3": "world_to_camera", "2.1": 
          "12.5": "tight_distribution",
          "13.1": "voxel_iou", "13.2": "multiview_iou_loss", "13.3": "view_eyes", "13.4": "train_step",
          "13.5": "visual_hull",
-         "14.1": "lambert_form_factor", "14.2": "project_from_point", "14.3": "clip_polygon", "14.4": "edge_derivative"}
+         "14.1": "lambert_form_factor", "14.2": "project_from_point", "14.3": "clip_polygon", "14.4": "edge_derivative",
+         "15.1": "covariance_2d", "15.2": "composite_pixel", "15.3": "swap_jump", "15.4": "ray_density"}
 WITHOUT_REFERENCE = {"7.5", "7.6"}       # no package function does their work: they forbid the ones that help
-LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-14: tests/test_grading_NN.py
+LECTURES_TESTED_HERE = ("1.", "2.", "3.", "4.")           # lectures 05-15: tests/test_grading_NN.py
 
 
 def rodrigues_dividing_by_theta(w):

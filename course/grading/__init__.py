@@ -9,7 +9,7 @@ The package, one module per job; each imports only the modules above it in this 
 
     helpers.py     the helpers checks are written with: compare, require / Fail, grade_parts, _diagnose, ...
     registry.py    Task, Result, the TASKS registry and its ``task`` decorator, run_check, check, format_result
-    lecture01.py   the checks of lecture 1's tasks (1.1-1.4), registered on import; likewise lecture02-14
+    lecture01.py   the checks of lecture 1's tasks (1.1-1.4), registered on import; likewise lecture02-15
     release.py     ``python -m course release``: exercises/ written from solutions/
     submissions.py who handed in a notebook (Submission, student_of) and its lecture
     roster.py      the class list: names, ids, emails, sections, extensions (``grade --roster``)
@@ -33,7 +33,7 @@ from .registry import (DEFAULT_TIMEOUT, TASKS, CheckTimeout, Result, Task, check
                        tasks_for_lecture)
 from . import lecture01, lecture02, lecture03, lecture04, lecture05, lecture06  # noqa: F401  (importing them
 from . import lecture07, lecture08, lecture09, lecture10, lecture11  # noqa: F401   registers every task)
-from . import lecture12, lecture13, lecture14  # noqa: F401
+from . import lecture12, lecture13, lecture14, lecture15  # noqa: F401
 from .grader import cli, grade_notebook
 from .registry import _explain_undefined_task_functions
 
