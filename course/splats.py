@@ -26,9 +26,9 @@ above the 1/255 cut, misses it. Here every Gaussian is evaluated wherever its α
 same for every tile or chunk size (``tile``), which only skips Gaussians that cannot reach the cut in a tile.
 
 Autograd differentiates every smooth part: the means, scales, rotations, opacities, colours and the camera's
-K, R and t. It does not see two discontinuities, both decisions: the **depth order** (when two means swap depth,
-the image jumps where both cover a pixel) and the **cut-offs** (α < 1/255, α clamped at 0.99, T < 1e-4): lecture
-15 measures both.
+K, R and t. It does not see the discontinuities, all decisions: the **depth order** (when two means swap depth,
+the image jumps where both cover a pixel; lecture 15 measures it) and the **cut-offs** α < 1/255 and T < 1e-4
+(``tests/test_splats.py`` measures the first). The clamp at α = 0.99 is continuous, a kink in the derivative.
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ import torch
 from .tensors import _check_finite, as_tensor
 
 __all__ = ["render_gaussians", "render_gaussians_volume", "quaternion_to_matrix", "covariance_3d",
-           "project_gaussians", "swap_scene", "swap_study", "splat_volume_study", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
+           "project_gaussians", "swap_scene", "swap_study", "splat_volume_study", "volume_strength", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
 
 NEAR = 0.2               # a mean closer than this (view-space depth) is culled
 ALPHA_MIN = 1.0 / 255.0  # a Gaussian is skipped at a pixel where its alpha is below this
@@ -218,10 +218,7 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
         return bg.expand(H, W, 3).clone()
     inv = torch.linalg.inv(covariance_3d(s, q))                                  # (N, 3, 3)
     eye = -camera.R.to(m.dtype).T @ camera.t.to(m.dtype)
-    toward = m - eye
-    toward = toward / toward.norm(dim=1, keepdim=True)
-    line = torch.einsum("ni,nij,nj->n", toward, inv, toward)                   # dᵀ Σ⁻¹ d along the central ray
-    kappa = -torch.log1p(-o.clamp(max=1 - 1e-12)) / torch.sqrt(2 * math.pi / line)
+    kappa = volume_strength(m, s, q, o, eye)
     depth = (m - eye) @ camera.R.to(m.dtype)[2]
     pad = 6 * float(s.detach().max())                                          # the tails beyond: 2e-9 of τ
     lo = float(depth.detach().min()) - pad if near is None else float(near)
@@ -252,9 +249,9 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
 # ------------------------------------------------------------------------------- the depth swap, measured
 
 def swap_scene(size: int = 16):
-    """Two overlapping Gaussians, red in front at s = 0 of the blue one's motion: ``(params, camera, toward,
-    swap)`` where the blue one's mean moves by ``s · toward`` (the unit view direction) and ``swap`` is the s at
-    which the two means' view depths are equal (there the depth order, and the image, jump)."""
+    """Two overlapping Gaussians, red and blue: ``(params, camera, toward, swap)`` where the blue one's mean moves
+    by ``s · toward`` (the unit view direction) and ``swap`` is the s at which the two means' view depths are equal
+    (blue in front for s below it, red above; there the depth order, and the image, jump)."""
     from .camera import Camera
     camera = Camera.look_at((0.4, 0.6, 4.0), (0.0, 0.0, 0.0), fov_y=45.0, width=size, height=size,
                             dtype=torch.float64)
@@ -327,3 +324,14 @@ def splat_volume_study(size: int = 24, samples: int = 256) -> dict:
         b = render_gaussians_volume(m, s, q, o, c, cam, samples=samples)
         out[name] = float((a - b).abs().max())
     return out
+
+
+def volume_strength(means, scales, rotations, opacities, eye) -> torch.Tensor:
+    """(N,) each Gaussian's peak density κ in ``render_gaussians_volume``: the optical depth along the ray from
+    ``eye`` (3,) through its mean, ``κ sqrt(2π / (uᵀ Σ⁻¹ u))`` (u the ray's unit direction: the 3D Gaussian
+    integrated along the line), set to ``-ln(1 - o)`` so that the ray sees opacity o there."""
+    inv = torch.linalg.inv(covariance_3d(scales, rotations))
+    toward = means - eye
+    toward = toward / toward.norm(dim=1, keepdim=True)
+    line = torch.einsum("ni,nij,nj->n", toward, inv, toward)
+    return -torch.log1p(-opacities.clamp(max=1 - 1e-12)) / torch.sqrt(2 * math.pi / line)

@@ -256,3 +256,31 @@ def test_lecture_14_penumbra_is_legible_exact_and_carries_its_line():
         assert float((shown - fd).abs().max()) < 1e-6 * max(1.0, float(fd.abs().max()))
         assert abs(out["gradient"] - float(fd.abs().sum())) < 1e-5 * out["gradient"]
         plt.close("all")
+
+
+def test_lecture_15_gaussian_is_legible_and_its_gradient_is_autograds():
+    """The explorer's derivative image against central differences of the splatted image (away from the swap),
+    at the defaults and with moved controls; its line is in the figure."""
+    import torch
+    from course.splats import render_gaussians, swap_scene
+    for kwargs in ({}, dict(scale=0.3, angle=-45.0, opacity=0.5, offset=0.25)):
+        out = E.draw_gaussian(**kwargs)
+        fig = plt.gcf()
+        assert out["line"] in [t.get_text() for t in fig.texts], kwargs
+        shown = torch.as_tensor(fig.axes[1].images[0].get_array())
+        assert len(fig.axes) == 3 and shown.shape == (E.GAUSSIAN_SIZE, E.GAUSSIAN_SIZE)
+        plt.close("all")
+        params, camera, toward, swap = swap_scene(E.GAUSSIAN_SIZE)
+        means, scales, rotations, opacities, colors = (p.clone() for p in params)
+        import math
+        half = math.radians(kwargs.get("angle", 30.0)) / 2
+        rotations[1] = torch.cat([torch.tensor([math.cos(half)], dtype=torch.float64), math.sin(half) * camera.R[2]])
+        scales[1] = kwargs.get("scale", 0.5) * torch.tensor([1.0, 0.4, 1.0], dtype=torch.float64)
+        opacities[1] = kwargs.get("opacity", 0.8)
+
+        def image(s):
+            m = torch.stack([means[0], means[1] + s * toward])
+            return render_gaussians(m, scales, rotations, opacities, colors, camera).sum(-1)
+        s0, h = swap + kwargs.get("offset", -0.2), 1e-6
+        fd = (image(s0 + h) - image(s0 - h)) / (2 * h)
+        assert float((shown - fd).abs().max()) < 1e-5 * max(1.0, float(fd.abs().max()))

@@ -5,7 +5,7 @@ teapot fits the unit sphere) to lecture 10's training images (``ShadedData``) wi
 (``course.volume.render_volume``, trilinear, ``samples`` steps a ray), one random view a step, Adam on the L1
 image difference. The density is ``scale · softplus(raw)`` (non-negative, ``scale`` per unit length) and the
 colour ``sigmoid(raw)``. No regulariser: what the views do not constrain (inside, behind, between) stays where
-the optimiser leaves it, floaters included; lecture 15 shows them. Reported as ``fit_gaussians`` does: the
+the optimiser leaves it, floaters included. Reported as ``fit_gaussians`` does: the
 held-out PSNR over the 16 views and the steps' time.
 """
 from __future__ import annotations

@@ -29,9 +29,9 @@ from .raster import plot_raster
 __all__ = ["fill_rule_explorer", "supersampling_explorer", "shadow_map_explorer", "bvh_explorer",
            "area_light_explorer", "soft_explorer", "edge_explorer", "finite_difference_explorer",
            "edge_sampling_explorer", "fit_explorer", "loss_landscape_explorer", "style_weight_explorer",
-           "shadow_light_explorer", "penumbra_explorer", "draw_fill_rule", "draw_supersampling", "draw_shadow_map", "draw_bvh",
+           "shadow_light_explorer", "penumbra_explorer", "gaussian_explorer", "draw_fill_rule", "draw_supersampling", "draw_shadow_map", "draw_bvh",
            "draw_area_light", "draw_soft", "draw_edge", "draw_finite_difference", "draw_edge_sampling",
-           "draw_fit", "draw_loss_landscape", "draw_style_weight", "draw_shadow_light", "draw_penumbra", "EXPLORERS"]
+           "draw_fit", "draw_loss_landscape", "draw_style_weight", "draw_shadow_light", "draw_penumbra", "draw_gaussian", "EXPLORERS"]
 
 F64 = torch.float64
 FIGURE_SCALE = 1.0          # the figures are 5-9 inches wide: at matplotlib's 100 dpi they already fill a notebook
@@ -984,6 +984,57 @@ def penumbra_explorer() -> None:
     _show(draw_penumbra)
 
 
+# ------------------------------------------------------------------------------------------------ lecture 15
+
+GAUSSIAN_SIZE = 48                                                          # pixels a side
+
+
+def draw_gaussian(scale: float = 0.5, angle: float = 30.0, opacity: float = 0.8, offset: float = -0.2) -> dict:
+    """Two Gaussians (lecture 15's swap scene): the red one fixed, the blue one of standard deviations
+    ``scale`` × (1, 0.4, 1) turned ``angle`` degrees about the view axis, opacity ``opacity``, moved ``offset``
+    along the view direction from its swap point (negative: in front of the red one). Left: the splatted image
+    (``render_gaussians``); right: its derivative with respect to the offset by forward-mode autograd. The
+    derivative is what autograd sees: smooth on each side of 0, where the depth order flips and the image
+    jumps (cross 0 and watch the colours trade places), while the derivative shows no trace of that jump.
+    """
+    import torch.autograd.forward_ad as fwAD
+
+    from ..splats import render_gaussians, swap_scene
+    scale = _check_range("scale", scale, 0.05, 2.0)
+    angle = _check_range("angle", angle, -360.0, 360.0)
+    opacity = _check_range("opacity", opacity, 0.0, 1.0)
+    offset = _check_range("offset", offset, -2.0, 2.0)
+    params, camera, toward, swap = swap_scene(GAUSSIAN_SIZE)
+    means, scales, rotations, opacities, colors = (p.clone() for p in params)
+    half = math.radians(angle) / 2
+    axis = camera.R[2]                                                      # the view axis, world space
+    rotations[1] = torch.cat([torch.tensor([math.cos(half)], dtype=F64), math.sin(half) * axis])
+    scales[1] = scale * torch.tensor([1.0, 0.4, 1.0], dtype=F64)
+    opacities[1] = opacity
+    with fwAD.dual_level():
+        s = fwAD.make_dual(torch.tensor(swap + offset, dtype=F64), torch.tensor(1.0, dtype=F64))
+        moved = torch.stack([means[0], means[1] + s * toward])
+        image, tangent = fwAD.unpack_dual(render_gaussians(moved, scales, rotations, opacities, colors, camera))
+    d_image = tangent.sum(-1)
+    order = "blue in front" if offset < 0 else "red in front"
+    line = (f"scale {scale:g}, angle {angle:g}, opacity {opacity:g}, offset {offset:g} ({order}): image mean "
+            f"{_r4(image.mean())}, |d image / d offset| summed {_r4(d_image.abs().sum())}")
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.9))
+    show_image(image, ax=axes[0], srgb=False)
+    axes[0].set_title(f"two Gaussians, {order}", fontsize=10)
+    signed_image(d_image, ax=axes[1])
+    axes[1].set_title("d image / d offset (RGB summed), autograd", fontsize=10)
+    fig.colorbar(axes[1].images[0], ax=axes[1], fraction=0.046, pad=0.03, label="per unit of offset")
+    fig.text(0.5, 0.01, line, ha="center", va="bottom", fontsize=9)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    return dict(mean=float(image.mean()), gradient=float(d_image.abs().sum()), line=line)
+
+
+def gaussian_explorer() -> None:
+    """Lecture 15: a Gaussian's scale, rotation and opacity, and the depth swap."""
+    _show(draw_gaussian)
+
+
 # ------------------------------------------------------------------------------------------------ the registry
 # name -> (explorer, its draw function, its controls (see ``explorer``), True where it redraws as a slider moves,
 # False where it redraws on release with its controls greyed out meanwhile)
@@ -1014,4 +1065,7 @@ EXPLORERS = {
                         dict(azimuth=(-180.0, 180.0, 5.0, 30.0), elevation=(15.0, 85.0, 5.0, 60.0)), False),
     "14 penumbra": (penumbra_explorer, draw_penumbra,
                     dict(size=(0.05, 0.8, 0.05, 0.4), x=(-1.0, 1.0, 0.1, 0.3), height=(1.2, 3.0, 0.1, 2.0)), False),
+    "15 gaussian": (gaussian_explorer, draw_gaussian,
+                    dict(scale=(0.1, 1.0, 0.05, 0.5), angle=(-90.0, 90.0, 5.0, 30.0), opacity=(0.05, 0.99, 0.02, 0.8),
+                         offset=(-0.5, 0.5, 0.05, -0.2)), True),
 }
