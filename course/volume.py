@@ -114,11 +114,10 @@ def render_volume(density, colors, lo, hi, camera, samples: int = 64, background
     points = o[:, None] + mid[..., None] * d[:, None]
     s = sample_grid(sigma[..., None], points.reshape(-1, 3), lo, hi, mode).view(-1, n)
     col = sample_grid(c, points.reshape(-1, 3), lo, hi, mode).view(-1, n, 3)
-    alpha = 1 - torch.exp(-s * delta[:, None])
-    clear = torch.exp(-s * delta[:, None])
-    before = torch.exp(-torch.cumsum(torch.cat([torch.zeros_like(s[:, :1]), s[:, :-1]], 1) * delta[:, None], 1))
-    image = ((before * alpha)[..., None] * col).sum(1)
-    T = before[:, -1] * clear[:, -1]
+    tau = s * delta[:, None]                                                  # each step's optical depth
+    before = torch.exp(-torch.cumsum(torch.cat([torch.zeros_like(tau[:, :1]), tau[:, :-1]], 1), 1))
+    image = ((before * -torch.expm1(-tau))[..., None] * col).sum(1)          # α = 1 - e^{-σδ}
+    T = torch.exp(-tau.sum(1))
     bg = as_tensor(background, dtype=sigma.dtype, name="background")
     image = image + T[:, None] * bg
     return image.view(camera.height, camera.width, 3)

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..splats import render_gaussians
+from ..splats import quaternion_to_matrix, render_gaussians
 from . import losses
 
 __all__ = ["GaussianFit", "fit_gaussians", "gaussian_psnr"]
@@ -103,7 +103,7 @@ def _densify(raw, grad_sum, grad_count, grad_threshold, split_scale, prune_opaci
             new[k].append(raw[k][clone])
     if bool(split.any()):
         scales = raw[1][split].exp()
-        R = _rotation(raw[2][split] / raw[2][split].norm(dim=1, keepdim=True))
+        R = quaternion_to_matrix(raw[2][split] / raw[2][split].norm(dim=1, keepdim=True))
         for _ in range(2):
             offset = (R @ (torch.randn(scales.shape, generator=generator, dtype=torch.float64) * scales)[..., None])[..., 0]
             new[0].append(raw[0][split] + offset)
@@ -115,11 +115,6 @@ def _densify(raw, grad_sum, grad_count, grad_threshold, split_scale, prune_opaci
     merged = [torch.cat(parts) for parts in new]
     alive = torch.sigmoid(merged[3]) >= prune_opacity
     return [p[alive].clone().requires_grad_() for p in merged]
-
-
-def _rotation(q):
-    from ..splats import quaternion_to_matrix
-    return quaternion_to_matrix(q)
 
 
 def fit_gaussians(data, *, n: int = 3000, steps: int = 1200, init: str = "hull", seed: int = 0, lr: float = 1.0,

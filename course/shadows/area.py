@@ -16,7 +16,7 @@ n_L and the direction back to x. Three steps give it exactly, for every point, w
    outside it hides nothing, and a part near x's level would project to infinity), and projected from x onto the
    light's plane:
    ``q = x + (v - x) · d(x) / (d(x) - d(v))`` with d the signed distance to the plane. The projections are
-   subtracted from the visible light by convex polygon clipping (``gradients._subtract``), one occluder after
+   subtracted from the visible light by convex polygon clipping (``_subtract_batch``), one occluder after
    another, so where occluders overlap each part of the light is removed once.
 3. **Lambert's formula.** For a polygon with vertices q_i, r_i = q_i - x,
 

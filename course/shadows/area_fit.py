@@ -149,9 +149,9 @@ def polygon_iou(a, b, n: int = 400, extent: float = 1.5) -> float:
 
     def inside(poly):
         poly = torch.as_tensor(poly, dtype=torch.float64).detach()
-        a, b = poly, poly.roll(-1, 0)
-        crosses = ((a[:, 1] > p[:, None, 1]) != (b[:, 1] > p[:, None, 1]))
-        x = a[:, 0] + (p[:, None, 1] - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1] + 1e-300)
+        start, end = poly, poly.roll(-1, 0)                                    # each edge
+        crosses = ((start[:, 1] > p[:, None, 1]) != (end[:, 1] > p[:, None, 1]))
+        x = start[:, 0] + (p[:, None, 1] - start[:, 1]) * (end[:, 0] - start[:, 0]) / (end[:, 1] - start[:, 1] + 1e-300)
         return ((crosses & (p[:, None, 0] < x)).sum(1) % 2) == 1
     ia, ib = inside(a), inside(b)
     return float((ia & ib).sum()) / max(float((ia | ib).sum()), 1.0)
