@@ -40,7 +40,8 @@ import torch
 from .tensors import _check_finite, as_tensor
 
 __all__ = ["render_gaussians", "render_gaussians_volume", "quaternion_to_matrix", "covariance_3d",
-           "project_gaussians", "swap_scene", "swap_study", "splat_volume_study", "volume_strength", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
+           "project_gaussians", "swap_scene", "swap_study", "splat_volume_study", "splat_volume_causes", "splat_step",
+           "SPLAT_STEPS", "CAUSES", "volume_strength", "NEAR", "ALPHA_MIN", "ALPHA_MAX", "T_MIN", "BLUR"]
 
 NEAR = 0.2               # a mean closer than this (view-space depth) is culled
 ALPHA_MIN = 1.0 / 255.0  # a Gaussian is skipped at a pixel where its alpha is below this
@@ -64,10 +65,11 @@ def covariance_3d(scales, rotations) -> torch.Tensor:
     return M @ M.transpose(-1, -2)
 
 
-def project_gaussians(means, scales, rotations, camera):
-    """The Gaussians seen by ``camera``: (pixel means (N, 2), 2D covariances (N, 2, 2) with the 0.3 px² added,
-    view-space depths (N,)) (module docstring, steps 2-3), differentiable in everything."""
-    K, R, t = camera.K.to(means.dtype), camera.R.to(means.dtype), camera.t.to(means.dtype)
+def project_gaussians(means, scales, rotations, camera, *, blur: float = BLUR):
+    """The Gaussians seen by ``camera``: (pixel means (N, 2), 2D covariances (N, 2, 2) with ``blur`` px² added to
+    the diagonal (the reference's 0.3), view-space depths (N,)) (module docstring, steps 2-3), differentiable in
+    everything."""
+    K, R, t = camera.K.to(means), camera.R.to(means), camera.t.to(means)        # means' dtype and device
     cam = means @ R.T + t                                                   # (N, 3) camera space
     x, y, z = cam.unbind(-1)
     K2 = K[:2, :2]
@@ -82,7 +84,7 @@ def project_gaussians(means, scales, rotations, camera):
     J = K2 @ P                                                              # (N, 2, 3)
     T = J @ R                                                               # J W
     cov2 = T @ covariance_3d(scales, rotations) @ T.transpose(-1, -2)
-    cov2 = cov2 + BLUR * torch.eye(2, dtype=means.dtype, device=means.device)
+    cov2 = cov2 + float(blur) * torch.eye(2, dtype=means.dtype, device=means.device)
     mean2 = xy @ K2.T + K[:2, 2]
     return mean2, cov2, z
 
@@ -96,7 +98,7 @@ def _check(means, scales, rotations, opacities, colors, background):
     out = [m.to(dtype)]
     for value, name, shape in ((scales, "scales", (N, 3)), (rotations, "rotations", (N, 4)),
                                (opacities, "opacities", (N,)), (colors, "colors", (N, 3))):
-        v = as_tensor(value, dtype=dtype, name=name)
+        v = as_tensor(value, dtype=dtype, device=m.device, name=name)
         if tuple(v.shape) != shape:
             raise ValueError(f"{name} must have shape {shape}, got {tuple(v.shape)}")
         out.append(v)
@@ -112,7 +114,7 @@ def _check(means, scales, rotations, opacities, colors, background):
         if bool(((norm - 1).abs() > 1e-6).any()):
             raise ValueError(f"rotations must be unit quaternions (w, x, y, z): a norm is {float(norm.max()):.6g}; "
                              "normalise them (q / q.norm(dim=1, keepdim=True)) before rendering")
-    bg = as_tensor(background, dtype=dtype, name="background")
+    bg = as_tensor(background, dtype=dtype, device=m.device, name="background")
     if tuple(bg.shape) != (3,):
         raise ValueError(f"background must have shape (3,), got {tuple(bg.shape)}")
     return m, s, q, o, c, bg
@@ -211,15 +213,15 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
         raise ValueError(f"samples must be a positive integer, got {samples!r}")
     H, W = camera.height, camera.width
     origins, directions = camera.rays()
-    origins = origins.reshape(-1, 3).to(m.dtype)
-    directions = directions.reshape(-1, 3).to(m.dtype)
+    origins = origins.reshape(-1, 3).to(m)
+    directions = directions.reshape(-1, 3).to(m)
     directions = directions / directions.norm(dim=1, keepdim=True)
     if m.shape[0] == 0:
         return bg.expand(H, W, 3).clone()
     inv = torch.linalg.inv(covariance_3d(s, q))                                  # (N, 3, 3)
-    eye = -camera.R.to(m.dtype).T @ camera.t.to(m.dtype)
+    eye = -camera.R.to(m).T @ camera.t.to(m)
     kappa = volume_strength(m, s, q, o, eye)
-    depth = (m - eye) @ camera.R.to(m.dtype)[2]
+    depth = (m - eye) @ camera.R.to(m)[2]
     pad = 6 * float(s.detach().max())                                          # the tails beyond: 2e-9 of τ
     lo = float(depth.detach().min()) - pad if near is None else float(near)
     hi = float(depth.detach().max()) + pad if far is None else float(far)
@@ -227,10 +229,10 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
     out = []
     for start in range(0, origins.shape[0], chunk):
         o_r, d_r = origins[start:start + chunk], directions[start:start + chunk]
-        cos = d_r @ camera.R.to(m.dtype)[2]                                    # depth per unit along the ray
+        cos = d_r @ camera.R.to(m)[2]                                    # depth per unit along the ray
         s0, s1 = lo / cos, hi / cos
         delta = (s1 - s0) / n                                                  # (R,)
-        t = s0[:, None] + (torch.arange(n, dtype=m.dtype) + 0.5)[None] * delta[:, None]   # (R, n)
+        t = s0[:, None] + (torch.arange(n, dtype=m.dtype, device=m.device) + 0.5)[None] * delta[:, None]   # (R, n)
         x = o_r[:, None, :] + t[..., None] * d_r[:, None, :]                   # (R, n, 3)
         diff = x[:, :, None, :] - m[None, None]                                # (R, n, N, 3)
         qd = torch.einsum("rsni,nij,rsnj->rsn", diff, inv, diff)
@@ -292,22 +294,14 @@ def swap_study(width: float = 0.05, samples: int = 64, size: int = 16) -> dict:
                 corrected=autograd + jump / (2 * w))
 
 
-def splat_volume_study(size: int = 24, samples: int = 256) -> dict:
-    """Where splatting's approximations show (lecture 15): ``render_gaussians`` against
-    ``render_gaussians_volume`` of the same Gaussians, max |difference| over the image, in three scenes:
-
-    * ``alone``: one Gaussian in the middle of the view (what differs: the 0.3 px² blur, and the splat's linear
-      ``o e^{-q/2}`` against the medium's ``1 - e^{-τ}`` away from the centre ray);
-    * ``interpenetrating``: two Gaussians of different colours at almost the same place (the splat draws the
-      nearer mean's whole Gaussian over the other; the medium mixes them by density);
-    * ``off_axis``: one Gaussian near the corner of a wide (90°) view (the projection linearised at the mean).
-    Returns {scene: max |difference|} (floats)."""
+def _volume_scenes(size: int):
+    """The three scenes of ``splat_volume_study``: {name: (means, scales, rotations, opacities, colors, camera)}."""
     from .camera import Camera
     narrow = Camera.look_at((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), fov_y=30.0, width=size, height=size,
                             dtype=torch.float64)
     wide = Camera.look_at((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), fov_y=90.0, width=size, height=size,
                           dtype=torch.float64)
-    one = torch.tensor([[1.0, 0, 0, 0]], dtype=torch.float64)
+    one = torch.tensor([[1.0, 0, 0, 0]])
     scenes = {
         "alone": (torch.zeros(1, 3), torch.tensor([[0.3, 0.2, 0.25]]), one, torch.tensor([0.6]),
                   torch.tensor([[1.0, 0.5, 0.2]]), narrow),
@@ -317,12 +311,111 @@ def splat_volume_study(size: int = 24, samples: int = 256) -> dict:
         "off_axis": (torch.tensor([[2.6, 2.6, 0.0]]), torch.tensor([[0.3, 0.2, 0.25]]), one, torch.tensor([0.6]),
                      torch.tensor([[1.0, 0.5, 0.2]]), wide),
     }
+    return {name: tuple(v.to(torch.float64) for v in scene[:5]) + (scene[5],) for name, scene in scenes.items()}
+
+
+def splat_volume_study(size: int = 24, samples: int = 256) -> dict:
+    """Where splatting's approximations show (lecture 15): ``render_gaussians`` against
+    ``render_gaussians_volume`` of the same Gaussians, max |difference| over the image, in three scenes:
+
+    * ``alone``: one Gaussian in the middle of a 30° view (what differs: the 0.3 px² blur, the 1/255 cut, and the
+      splat's linear ``o e^{-q/2}`` against the medium's ``1 - e^{-τ}`` away from the centre ray);
+    * ``interpenetrating``: two Gaussians of different colours at almost the same place (the splat draws the
+      nearer mean's whole Gaussian over the other; the medium mixes them by density);
+    * ``off_axis``: one Gaussian near the corner of a wide (90°) view (the projection linearised at the mean).
+    Returns {scene: max |difference|} (floats); ``splat_volume_causes`` splits each between the causes."""
     out = {}
-    for name, (m, s, q, o, c, cam) in scenes.items():
-        m, s, q, o, c = (v.to(torch.float64) for v in (m, s, q, o, c))
+    for name, (m, s, q, o, c, cam) in _volume_scenes(size).items():
         a = render_gaussians(m, s, q, o, c, cam)
         b = render_gaussians_volume(m, s, q, o, c, cam, samples=samples)
         out[name] = float((a - b).abs().max())
+    return out
+
+
+SPLAT_STEPS = ("reference", "no cut-offs", "no blur", "exponential falloff", "exact footprint")
+CAUSES = ("cut-offs", "blur", "falloff", "linearisation", "sort")
+
+
+def splat_step(means, scales, rotations, opacities, colors, camera, background=(0.0, 0.0, 0.0), *,
+               step: str = "exact footprint") -> torch.Tensor:
+    """(H, W, 3) the splat with splatting's approximations taken away one at a time, in the order of
+    ``SPLAT_STEPS`` (each step keeps the ones before it; every one composites whole Gaussians in the order of
+    their means' depth, culled at 0.2):
+
+    * ``"reference"``: ``render_gaussians``;
+    * ``"no cut-offs"``: ``α = o e^{-q/2}``, never skipped below 1/255 nor clamped at 0.99, no early stop;
+    * ``"no blur"``: the 2D covariance without the 0.3 px²;
+    * ``"exponential falloff"``: ``α = 1 - (1 - o)^{e^{-q/2}}``, the opacity a medium of the splat's
+      footprint would have (``1 - e^{-τ}`` with τ proportional to the Gaussian, ``-ln(1 - o)`` at its centre);
+    * ``"exact footprint"``: ``α = 1 - e^{-κ ∫ G}``, the 3D Gaussian integrated along each pixel's ray in closed
+      form (``∫ exp(-½ (x - μ)ᵀ Σ⁻¹ (x - μ)) dt = sqrt(2π / a) exp(-½ (c - b² / a))``, a = uᵀ Σ⁻¹ u,
+      b = uᵀ Σ⁻¹ (o - μ), c = (o - μ)ᵀ Σ⁻¹ (o - μ) for the ray o + t u) with ``volume_strength``'s κ: no
+      linearised projection. What is left against ``render_gaussians_volume`` is the sort (and its quadrature).
+
+    For one Gaussian in an orthographic view the last two steps give the same image: there the projection is
+    linear and the footprint exactly Gaussian (``tests/test_splats.py``)."""
+    if step not in SPLAT_STEPS:
+        raise ValueError(f"step must be one of {SPLAT_STEPS}, got {step!r}")
+    if step == "reference":
+        return render_gaussians(means, scales, rotations, opacities, colors, camera, background)
+    m, s, q, o, c, bg = _check(means, scales, rotations, opacities, colors, background)
+    H, W = camera.height, camera.width
+    k = SPLAT_STEPS.index(step)
+    mean2, cov2, z = project_gaussians(m, s, q, camera, blur=BLUR if k < 2 else 0.0)
+    order = torch.argsort(z.detach(), stable=True)
+    keep = order[z.detach()[order] > NEAR]
+    if keep.numel() == 0:
+        return bg.expand(H, W, 3).clone()
+    if k < 4:
+        jj, ii = torch.meshgrid(torch.arange(W, dtype=m.dtype, device=m.device) + 0.5,
+                                torch.arange(H, dtype=m.dtype, device=m.device) + 0.5,
+                                indexing="xy")
+        d = torch.stack([jj.reshape(-1), ii.reshape(-1)], -1)[:, None, :] - mean2[keep][None]     # (P, N, 2)
+        inv2 = torch.linalg.inv(cov2[keep])
+        gauss = torch.exp(-0.5 * torch.einsum("pni,nij,pnj->pn", d, inv2, d))
+        ok = o[keep]
+        alpha = ok * gauss if k < 3 else -torch.expm1(gauss * torch.log1p(-ok.clamp(max=1 - 1e-12)))
+    else:
+        origins, directions = camera.rays()
+        origins = origins.reshape(-1, 3).to(m)
+        u = directions.reshape(-1, 3).to(m)
+        u = u / u.norm(dim=1, keepdim=True)
+        inv = torch.linalg.inv(covariance_3d(s[keep], q[keep]))                   # (N, 3, 3)
+        if camera.orthographic:
+            axis = camera.R.to(m)[2].expand(keep.numel(), 3)
+            kappa = _strength(inv, o[keep], axis)
+        else:
+            eye = -camera.R.to(m).T @ camera.t.to(m)
+            kappa = volume_strength(m[keep], s[keep], q[keep], o[keep], eye)
+        e = origins[:, None, :] - m[keep][None]                                   # (P, N, 3)
+        a = torch.einsum("pi,nij,pj->pn", u, inv, u)
+        b = torch.einsum("pi,nij,pnj->pn", u, inv, e)
+        cq = torch.einsum("pni,nij,pnj->pn", e, inv, e)
+        line = torch.sqrt(2 * math.pi / a) * torch.exp(-0.5 * (cq - b * b / a).clamp_min(0))
+        alpha = -torch.expm1(-kappa * line)
+    before = torch.cumprod(torch.cat([torch.ones_like(alpha[:, :1]), 1 - alpha[:, :-1]], 1), 1)
+    color = (alpha * before) @ c[keep] + (before[:, -1] * (1 - alpha[:, -1]))[:, None] * bg
+    return color.view(H, W, 3)
+
+
+def splat_volume_causes(size: int = 24, samples: int = 256) -> dict:
+    """``splat_volume_study`` split by cause: for each scene, max |difference| over the image between consecutive
+    steps of ``splat_step`` (``"cut-offs"``: the reference against no cut-offs; ``"blur"``; ``"falloff"``;
+    ``"linearisation"``: the linearised footprint against the exact one), then ``"sort"``: the exact footprint
+    composited whole in depth order against ``render_gaussians_volume`` (the medium mixes by density);
+    ``"quadrature"``: the medium at ``samples`` against 4 × ``samples`` steps a ray (what the sort's number
+    cannot tell from it); ``"total"``: the reference against the medium, as ``splat_volume_study``. The five
+    causes' images sum to the total's (telescoping); their maxima bound it. Returns {scene: {name: float}}."""
+    out = {}
+    for name, (m, s, q, o, c, cam) in _volume_scenes(size).items():
+        images = [splat_step(m, s, q, o, c, cam, step=step) for step in SPLAT_STEPS]
+        medium = render_gaussians_volume(m, s, q, o, c, cam, samples=samples)
+        finer = render_gaussians_volume(m, s, q, o, c, cam, samples=4 * samples)
+        images.append(medium)
+        row = {cause: float((images[k + 1] - images[k]).abs().max()) for k, cause in enumerate(CAUSES)}
+        row["quadrature"] = float((medium - finer).abs().max())
+        row["total"] = float((images[-1] - images[0]).abs().max())
+        out[name] = row
     return out
 
 
@@ -330,8 +423,12 @@ def volume_strength(means, scales, rotations, opacities, eye) -> torch.Tensor:
     """(N,) each Gaussian's peak density κ in ``render_gaussians_volume``: the optical depth along the ray from
     ``eye`` (3,) through its mean, ``κ sqrt(2π / (uᵀ Σ⁻¹ u))`` (u the ray's unit direction: the 3D Gaussian
     integrated along the line), set to ``-ln(1 - o)`` so that the ray sees opacity o there."""
-    inv = torch.linalg.inv(covariance_3d(scales, rotations))
     toward = means - eye
-    toward = toward / toward.norm(dim=1, keepdim=True)
+    return _strength(torch.linalg.inv(covariance_3d(scales, rotations)), opacities,
+                     toward / toward.norm(dim=1, keepdim=True))
+
+
+def _strength(inv, opacities, toward):
+    """κ of ``volume_strength`` from the inverse covariances (N, 3, 3) and the rays' unit directions (N, 3)."""
     line = torch.einsum("ni,nij,nj->n", toward, inv, toward)
     return -torch.log1p(-opacities.clamp(max=1 - 1e-12)) / torch.sqrt(2 * math.pi / line)

@@ -313,6 +313,66 @@ def test_splat_and_volume_differ_most_where_gaussians_interpenetrate():
     assert 0 < study["alone"] < 0.1 and study["interpenetrating"] > 2 * study["alone"]
 
 
+def _one_gaussian(seed):
+    g = torch.Generator().manual_seed(seed)
+    q = torch.randn(1, 4, generator=g, dtype=F64)
+    return (torch.rand(1, 3, generator=g, dtype=F64) * 0.4 - 0.2, 0.15 + 0.2 * torch.rand(1, 3, generator=g, dtype=F64),
+            q / q.norm(), torch.tensor([0.7], dtype=F64), torch.rand(1, 3, generator=g, dtype=F64))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_splat_steps_start_at_the_reference_and_end_at_the_medium(seed):
+    """The first step is render_gaussians; with no cut-off in play (every α in [1/255, 0.99], T above 1e-4) the
+    second equals it; for one Gaussian the exact footprint is the medium (to the quadrature's error)."""
+    from course.splats import render_gaussians_volume, splat_step
+    scene = _one_gaussian(seed)
+    cam = Camera.look_at((0.3, 0.2, 3.0), (0.0, 0.0, 0.0), fov_y=40.0, width=12, height=10, dtype=F64)
+    assert torch.equal(splat_step(*scene, cam, BACKGROUND, step="reference"),
+                       render_gaussians(*scene, cam, BACKGROUND))
+    wide = (scene[0], scene[1] * 4) + scene[2:]                             # α above 1/255 on every pixel
+    assert float((splat_step(*wide, cam, BACKGROUND, step="no cut-offs")
+                  - render_gaussians(*wide, cam, BACKGROUND)).abs().max()) < 1e-14
+    exact = splat_step(*scene, cam, BACKGROUND, step="exact footprint")
+    medium = render_gaussians_volume(*scene, cam, BACKGROUND, samples=256)
+    assert float((exact - medium).abs().max()) < 1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_an_orthographic_footprint_is_exactly_the_linearised_one(seed):
+    """In an orthographic view the projection is linear: the splat's footprint (without the 0.3 px² blur) is the
+    3D Gaussian integrated along the rays, exactly; in perspective it is not."""
+    from course.splats import splat_step
+    scene = _one_gaussian(seed)
+    ortho = camera(orthographic=True)
+    a = splat_step(*scene, ortho, BACKGROUND, step="exponential falloff")
+    b = splat_step(*scene, ortho, BACKGROUND, step="exact footprint")
+    assert float((a - b).abs().max()) < 1e-12
+    persp = Camera.look_at((0.0, 0.0, 1.5), (0.0, 0.0, 0.0), fov_y=90.0, width=20, height=16, dtype=F64)
+    a = splat_step(*scene, persp, BACKGROUND, step="exponential falloff")
+    b = splat_step(*scene, persp, BACKGROUND, step="exact footprint")
+    assert float((a - b).abs().max()) > 1e-3
+
+
+def test_the_causes_split_the_splat_against_the_medium():
+    """Each scene's difference split by cause: the five causes' images telescope to the total; a Gaussian alone
+    differs by its falloff, interpenetrating ones by the sort, the one in the corner of the wide view by the blur
+    and the linearisation (the lecture prints these)."""
+    from course.splats import CAUSES, splat_volume_causes
+    study = splat_volume_causes(size=16, samples=64)
+    for row in study.values():
+        assert row["total"] <= sum(row[c] for c in CAUSES) + 1e-12
+        assert row["quadrature"] < 1e-5
+        assert abs(row["cut-offs"] - 1 / 255) < 1e-3                         # one pixel's α crossing the cut
+    alone, pair, corner = study["alone"], study["interpenetrating"], study["off_axis"]
+    assert alone["sort"] < 1e-8 and corner["sort"] < 1e-8                  # one Gaussian: nothing to sort
+    assert max(alone, key=lambda c: alone[c] if c in CAUSES else 0) == "falloff"
+    assert pair["sort"] > 2 * pair["falloff"]
+    assert corner["linearisation"] > 5 * alone["linearisation"]
+    with pytest.raises(ValueError, match="step must be one of"):
+        from course.splats import splat_step
+        splat_step(*_one_gaussian(0), camera(), step="no sort")
+
+
 def test_float32_scenes_render_in_float32_close_to_float64():
     scene = random_scene(7, n=20)
     cam = camera()
@@ -320,3 +380,29 @@ def test_float32_scenes_render_in_float32_close_to_float64():
     f32 = render_gaussians(*(v.float() for v in scene), cam, BACKGROUND)
     assert f32.dtype == torch.float32
     assert float((f32.double() - f64).abs().max()) < 1e-4
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_the_same_image_and_gradient_on_cuda():
+    """render_gaussians on a CUDA device (means and camera there): the CPU's image and gradient to rounding;
+    the medium and the splat steps likewise."""
+    from course.splats import render_gaussians_volume, splat_step
+    scene = random_scene(3, n=30)
+    cam = camera()
+    leaves = [v.clone().requires_grad_() for v in scene]
+    cpu = render_gaussians(*leaves, cam, BACKGROUND)
+    cpu_grad = torch.autograd.grad((cpu ** 2).sum(), leaves)
+    dev = [v.cuda().requires_grad_() for v in scene]
+    gpu = render_gaussians(*dev, cam.to(device="cuda"), BACKGROUND)
+    assert gpu.device.type == "cuda"
+    gpu_grad = torch.autograd.grad((gpu ** 2).sum(), dev)
+    assert float((gpu.cpu() - cpu).abs().max()) < 1e-12
+    for a, b in zip(cpu_grad, gpu_grad):
+        assert float((b.cpu() - a).abs().max()) < 1e-10 * (1 + float(a.abs().max()))
+    small = Camera.look_at((0.4, 0.6, 4.0), (0.0, 0.0, 0.0), fov_y=45.0, width=8, height=6, dtype=F64)
+    a = render_gaussians_volume(*scene, small, BACKGROUND, samples=32)
+    b = render_gaussians_volume(*(v.cuda() for v in scene), small.to(device="cuda"), BACKGROUND, samples=32)
+    assert float((b.cpu() - a).abs().max()) < 1e-12
+    a = splat_step(*scene, small, BACKGROUND)
+    b = splat_step(*(v.cuda() for v in scene), small.to(device="cuda"), BACKGROUND)
+    assert float((b.cpu() - a).abs().max()) < 1e-12
