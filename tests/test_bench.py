@@ -236,6 +236,18 @@ def test_bench_penumbra_rows_bias_and_plot(tmp_path, capsys):
     assert (tmp_path / "p.png").stat().st_size > 0
 
 
+def test_bench_representations_fast_rows(capsys):
+    """The three fits' smoke run: a row per fit and the hull, shares of each row's error that sum to at most 1."""
+    from course.bench import representations
+    rows = representations.bench_representations(fast=True)
+    assert [r["fit"] for r in rows][1:] == [label for label, _, _ in representations.FITS]
+    for r in rows:
+        shares = sum(r[f"share_{name}"] for name, _ in representations.SHARES)
+        assert 0 < r["psnr"] < 100 and 0 <= shares <= 1 + 1e-12
+    assert rows[0]["inside_pixels"] > 0                                 # the gap under the lid, seen from above
+    assert "lid gap" in capsys.readouterr().out
+
+
 def test_bench_splats_rows(capsys):
     from course.bench import splats
     rows = splats.bench_splats(counts=(40,), sizes=(12,), repeat=1)

@@ -34,6 +34,9 @@
   and time of each estimator against the exact one.
 * ``splats`` (``course.bench.splats``): Gaussian splatting's images per second against the Gaussian count and
   the image size, forward and backward, beside the mesh rasterizer on the same views.
+* ``representations`` (``course.bench.representations``): the teapot fitted by Gaussians, a density grid and
+  the mesh: held-out PSNR, time, and where each fit's error lies (outline, the gap under the lid, shading,
+  floaters, see-through).
 * ``explorers`` (``course.bench.explorers``): every lecture explorer's redraw time as its controls move.
 * ``learn`` (``course.bench.learn``): single-image reconstruction trained through the soft rasterizer, against
   retrieval and a sphere (voxel IoU and Chamfer per family), and MVTN's learned views against fixed ones.
@@ -58,7 +61,7 @@ import os
 import torch
 
 from . import (aa, explorers, fit, gradients, grading, kernels, learn, lectures, precision, raster, raytrace,
-               penumbra, shadow_art, shadow_gradients, shadows, skips, soft, splats, style)
+               penumbra, representations, shadow_art, shadow_gradients, shadows, skips, soft, splats, style)
 from .raster import SCENES, bench_raster, scene
 from .skips import bench_skips
 from .timing import time_it, time_side_by_side
@@ -69,7 +72,7 @@ __all__ = ["SCENES", "scene", "time_it", "time_side_by_side", "bench_raster", "b
 BENCHES = {"raster": raster, "skips": skips, "precision": precision, "aa": aa,
            "raytrace": raytrace, "shadows": shadows, "soft": soft, "gradients": gradients, "fit": fit,
            "kernels": kernels, "style": style, "shadow-gradients": shadow_gradients, "shadow-art": shadow_art,
-           "penumbra": penumbra, "splats": splats,
+           "penumbra": penumbra, "splats": splats, "representations": representations,
            "explorers": explorers, "learn": learn, "grading": grading, "lectures": lectures}
 
 
