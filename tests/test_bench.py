@@ -253,3 +253,10 @@ def test_bench_splats_rows(capsys):
     rows = splats.bench_splats(counts=(40,), sizes=(12,), repeat=1)
     assert len(rows) == 1 and rows[0]["count"] == 40 and rows[0]["forward_ms"] > 0 and rows[0]["mesh_ms"] > 0
     assert "img/s" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_bench_splats_on_cuda_draws_the_cpus_image(capsys):
+    from course.bench import splats
+    rows = splats.bench_splats(counts=(200,), sizes=(32,), repeat=1, device="cuda")
+    assert rows[0]["device"].startswith("cuda") and rows[0]["cpu_diff"] < 1e-12
