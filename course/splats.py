@@ -201,11 +201,11 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
     pixel-centre ray (default: the span of the means' depths, widened by 6 of the largest standard deviation).
 
     ``κ_i`` makes one Gaussian alone look as the splat does at its centre: the optical depth along the ray from
-    the camera through its mean is ``κ_i sqrt(2π / (dᵀ Σ_i⁻¹ d))`` (the 3D Gaussian integrated along the line), set
+    the camera through its mean is ``κ_i sqrt(2π / (uᵀ Σ_i⁻¹ u))``, u the ray's unit direction (the 3D Gaussian integrated along the line), set
     to ``-ln(1 - o_i)`` so that the opacity there is o_i. Elsewhere the two differ where splatting approximates:
-    each Gaussian composited whole at its mean's depth (two that interpenetrate are drawn one over the other), the
-    projection linearised at the mean (J), the 0.3 px² blur, and ``1 - e^{-τ}`` against the splat's linear
-    ``o e^{-q/2}`` away from the centre. Lecture 15 shows where. Differentiable; float64 unless the means are
+    the cut-offs, the 0.3 px² blur, ``1 - e^{-τ}`` against the splat's linear ``o e^{-q/2}`` away from the centre,
+    the projection linearised at the mean (J), and each Gaussian composited whole at its mean's depth (two that
+    interpenetrate are drawn one over the other); ``splat_volume_causes`` measures each, lecture 15 prints them. Differentiable; float64 unless the means are
     float32."""
     m, s, q, o, c, bg = _check(means, scales, rotations, opacities, colors, background)
     n = int(samples)
@@ -318,12 +318,12 @@ def splat_volume_study(size: int = 24, samples: int = 256) -> dict:
     """Where splatting's approximations show (lecture 15): ``render_gaussians`` against
     ``render_gaussians_volume`` of the same Gaussians, max |difference| over the image, in three scenes:
 
-    * ``alone``: one Gaussian in the middle of a 30° view (what differs: the 0.3 px² blur, the 1/255 cut, and the
-      splat's linear ``o e^{-q/2}`` against the medium's ``1 - e^{-τ}`` away from the centre ray);
-    * ``interpenetrating``: two Gaussians of different colours at almost the same place (the splat draws the
-      nearer mean's whole Gaussian over the other; the medium mixes them by density);
-    * ``off_axis``: one Gaussian near the corner of a wide (90°) view (the projection linearised at the mean).
-    Returns {scene: max |difference|} (floats); ``splat_volume_causes`` splits each between the causes."""
+    * ``alone``: one Gaussian in the middle of a 30° view (standard deviations 2.2-3.4 px on screen);
+    * ``interpenetrating``: two Gaussians of different colours at almost the same place;
+    * ``off_axis``: one Gaussian near the corner of a wide (90°) view (0.7-1.1 px).
+    Returns {scene: max |difference|} (floats). ``splat_volume_causes`` splits each between the causes (measured:
+    the falloff decides ``alone``, the sort ``interpenetrating``, the 0.3 px² blur ``off_axis``, where the
+    linearised projection is ten times what it is in ``alone``)."""
     out = {}
     for name, (m, s, q, o, c, cam) in _volume_scenes(size).items():
         a = render_gaussians(m, s, q, o, c, cam)
@@ -404,8 +404,10 @@ def splat_volume_causes(size: int = 24, samples: int = 256) -> dict:
     ``"linearisation"``: the linearised footprint against the exact one), then ``"sort"``: the exact footprint
     composited whole in depth order against ``render_gaussians_volume`` (the medium mixes by density);
     ``"quadrature"``: the medium at ``samples`` against 4 × ``samples`` steps a ray (what the sort's number
-    cannot tell from it); ``"total"``: the reference against the medium, as ``splat_volume_study``. The five
-    causes' images sum to the total's (telescoping); their maxima bound it. Returns {scene: {name: float}}."""
+    cannot tell from it); ``"total"``: the reference against the medium, as ``splat_volume_study``;
+    ``"footprint_px"``: (smallest, largest) standard deviation of the scene's splats on screen in pixels, the blur
+    left out (the 0.3 px² matters where this is about a pixel). The five causes' images sum to the total's
+    (telescoping); their maxima bound it. Returns {scene: {name: float, "footprint_px": (float, float)}}."""
     out = {}
     for name, (m, s, q, o, c, cam) in _volume_scenes(size).items():
         images = [splat_step(m, s, q, o, c, cam, step=step) for step in SPLAT_STEPS]
@@ -415,6 +417,8 @@ def splat_volume_causes(size: int = 24, samples: int = 256) -> dict:
         row = {cause: float((images[k + 1] - images[k]).abs().max()) for k, cause in enumerate(CAUSES)}
         row["quadrature"] = float((medium - finer).abs().max())
         row["total"] = float((images[-1] - images[0]).abs().max())
+        spread = torch.linalg.eigvalsh(project_gaussians(m, s, q, cam, blur=0.0)[1]).sqrt()
+        row["footprint_px"] = (float(spread.min()), float(spread.max()))
         out[name] = row
     return out
 
