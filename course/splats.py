@@ -220,7 +220,10 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
         return bg.expand(H, W, 3).clone()
     inv = torch.linalg.inv(covariance_3d(s, q))                                  # (N, 3, 3)
     eye = -camera.R.to(m).T @ camera.t.to(m)
-    kappa = volume_strength(m, s, q, o, eye)
+    if camera.orthographic:                                                     # every ray along the view axis
+        kappa = _strength(inv, o, camera.R.to(m)[2].expand(m.shape[0], 3))
+    else:
+        kappa = volume_strength(m, s, q, o, eye)
     depth = (m - eye) @ camera.R.to(m)[2]
     pad = 6 * float(s.detach().max())                                          # the tails beyond: 2e-9 of τ
     lo = float(depth.detach().min()) - pad if near is None else float(near)

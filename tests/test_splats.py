@@ -347,6 +347,9 @@ def test_an_orthographic_footprint_is_exactly_the_linearised_one(seed):
     a = splat_step(*scene, ortho, BACKGROUND, step="exponential falloff")
     b = splat_step(*scene, ortho, BACKGROUND, step="exact footprint")
     assert float((a - b).abs().max()) < 1e-12
+    from course.splats import render_gaussians_volume
+    medium = render_gaussians_volume(*scene, ortho, BACKGROUND, samples=256)   # the medium along parallel rays
+    assert float((medium - b).abs().max()) < 1e-9
     persp = Camera.look_at((0.0, 0.0, 1.5), (0.0, 0.0, 0.0), fov_y=90.0, width=20, height=16, dtype=F64)
     a = splat_step(*scene, persp, BACKGROUND, step="exponential falloff")
     b = splat_step(*scene, persp, BACKGROUND, step="exact footprint")
