@@ -220,10 +220,7 @@ def render_gaussians_volume(means, scales, rotations, opacities, colors, camera,
         return bg.expand(H, W, 3).clone()
     inv = torch.linalg.inv(covariance_3d(s, q))                                  # (N, 3, 3)
     eye = -camera.R.to(m).T @ camera.t.to(m)
-    if camera.orthographic:                                                     # every ray along the view axis
-        kappa = _strength(inv, o, camera.R.to(m)[2].expand(m.shape[0], 3))
-    else:
-        kappa = volume_strength(m, s, q, o, eye)
+    kappa = _strength_in_view(camera, m, inv, o)
     depth = (m - eye) @ camera.R.to(m)[2]
     pad = 6 * float(s.detach().max())                                          # the tails beyond: 2e-9 of τ
     lo = float(depth.detach().min()) - pad if near is None else float(near)
@@ -384,12 +381,7 @@ def splat_step(means, scales, rotations, opacities, colors, camera, background=(
         u = directions.reshape(-1, 3).to(m)
         u = u / u.norm(dim=1, keepdim=True)
         inv = torch.linalg.inv(covariance_3d(s[keep], q[keep]))                   # (N, 3, 3)
-        if camera.orthographic:
-            axis = camera.R.to(m)[2].expand(keep.numel(), 3)
-            kappa = _strength(inv, o[keep], axis)
-        else:
-            eye = -camera.R.to(m).T @ camera.t.to(m)
-            kappa = volume_strength(m[keep], s[keep], q[keep], o[keep], eye)
+        kappa = _strength_in_view(camera, m[keep], inv, o[keep])
         e = origins[:, None, :] - m[keep][None]                                   # (P, N, 3)
         a = torch.einsum("pi,nij,pj->pn", u, inv, u)
         b = torch.einsum("pi,nij,pnj->pn", u, inv, e)
@@ -433,6 +425,18 @@ def volume_strength(means, scales, rotations, opacities, eye) -> torch.Tensor:
     toward = means - eye
     return _strength(torch.linalg.inv(covariance_3d(scales, rotations)), opacities,
                      toward / toward.norm(dim=1, keepdim=True))
+
+
+def _strength_in_view(camera, means, inv, opacities):
+    """κ of ``volume_strength`` for ``camera``'s ray through each mean: from its eye, or along its view axis for
+    an orthographic camera (parallel rays)."""
+    R = camera.R.to(means)
+    if camera.orthographic:
+        toward = R[2].expand(means.shape[0], 3)
+    else:
+        toward = means + R.T @ camera.t.to(means)                                # the mean minus the eye
+        toward = toward / toward.norm(dim=1, keepdim=True)
+    return _strength(inv, opacities, toward)
 
 
 def _strength(inv, opacities, toward):

@@ -360,7 +360,7 @@ def test_the_causes_split_the_splat_against_the_medium():
     """Each scene's difference split by cause: the five causes' images telescope to the total; a Gaussian alone
     differs by its falloff, interpenetrating ones by the sort, the one in the corner of the wide view by the blur
     and the linearisation (the lecture prints these)."""
-    from course.splats import CAUSES, splat_volume_causes
+    from course.splats import CAUSES, splat_step, splat_volume_causes
     study = splat_volume_causes(size=16, samples=64)
     for row in study.values():
         assert row["total"] <= sum(row[c] for c in CAUSES) + 1e-12
@@ -372,7 +372,6 @@ def test_the_causes_split_the_splat_against_the_medium():
     assert pair["sort"] > 2 * pair["falloff"]
     assert corner["linearisation"] > 5 * alone["linearisation"]
     with pytest.raises(ValueError, match="step must be one of"):
-        from course.splats import splat_step
         splat_step(*_one_gaussian(0), camera(), step="no sort")
 
 

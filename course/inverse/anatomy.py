@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import torch
 
+from . import losses
+
 __all__ = ["REGIONS", "error_anatomy", "inside_masks"]
 
 REGIONS = ("edge", "inside", "floaters", "see-through", "shading", "background")
@@ -105,9 +107,8 @@ def error_anatomy(renders, targets, masks, background, *, inside=None, tolerance
         sel = regions[name]
         out[name] = {"pixels": int(sel.sum()), "share": float(err[sel].sum()) / total if total > 0 else 0.0,
                      "views": int(sel.flatten(1).any(1).sum())}
-    mse = ((r - t) ** 2).flatten(1).mean(1)
     out["sse"] = total
     out["worst_view"] = int(err.flatten(1).sum(1).argmax())
-    out["psnr"] = [float(v) for v in -10 * torch.log10(mse.clamp_min(1e-20))]
+    out["psnr"] = [float(losses.psnr(a, b)) for a, b in zip(r, t)]           # as the fits' held-out PSNR
     out["regions"] = regions
     return out
